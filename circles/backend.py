@@ -1,0 +1,47 @@
+"""Taichi runtime set-up: `circles.init` wraps `ti.init`; nothing here runs at import."""
+from __future__ import annotations
+
+import taichi as ti
+
+ARCHES = ("auto", "cpu", "gpu")
+
+_state = {"initialized": False, "arch": None}
+
+
+def init(arch: str = "auto", **options) -> str:
+    """Start the Taichi runtime on `arch` ("cpu", "gpu" or "auto") and return the arch in use.
+
+    `options` go to `ti.init` unchanged (for example `cpu_max_num_threads=1`).
+    "gpu" fails with a clear error when no GPU backend can start; "auto" takes a GPU when
+    one is present and the CPU otherwise. Calling it again restarts the runtime: every
+    Simulation made before becomes unusable.
+    """
+    if arch not in ARCHES:
+        raise ValueError(f"arch {arch!r} is unknown: use one of {', '.join(ARCHES)}")
+    options.setdefault("log_level", ti.WARN)
+    if _state["initialized"]:
+        ti.reset()
+    if arch == "cpu":
+        ti.init(arch=ti.cpu, **options)
+    else:
+        ti.init(arch=ti.gpu, **options)
+    used = ti.lang.impl.current_cfg().arch
+    name = "cpu" if used in (ti.x64, ti.arm64) else "gpu"
+    if arch == "gpu" and name == "cpu":
+        ti.reset()
+        _state["initialized"] = False
+        raise RuntimeError("arch 'gpu' asked for, but no GPU backend could start: "
+                           "use arch='cpu' or arch='auto'")
+    _state.update(initialized=True, arch=name)
+    return name
+
+
+def ensure_init() -> str:
+    """Initialise with arch="auto" unless `init` was already called."""
+    if not _state["initialized"]:
+        init("auto")
+    return _state["arch"]
+
+
+def current_arch() -> str | None:
+    return _state["arch"]

@@ -1,0 +1,255 @@
+"""Scheme "event": exact collisions by time of impact, executed in parallel rounds.
+
+Within a step [0, t_end] every circle carries a local clock tau (its position is stored at
+tau). A round has three stages:
+
+1. predict: each circle whose neighbourhood changed finds its earliest event in
+   (tau, t_end], a pair time of impact (both circles brought to a common time) or a wall hit,
+   chosen by the key (time, lo, hi) so that ties break by ids.
+2. bound: a lower bound D_k on the time at which circle k's straight path can be disturbed
+   by anything other than its own predicted event. A neighbour l can only touch k after l
+   itself is disturbed (at min(t_l, D_l)) and after the gap between them has closed at the
+   largest closing speed 2 vlim:
+       D_k = min over l in the 3x3 cells of k of max(min(t_l, D_l), c_kl),
+       c_kl = (gap_kl + vlim (tau_k + tau_l)) / (2 vlim), gap measured at each own tau.
+   Iterated from the valid lower bound D = (earliest event of all), every iterate is a valid
+   lower bound, so two iterations suffice for correctness; more only add parallelism.
+3. execute: an event (i, j, t) is safe when i and j chose each other and t <= D_i, D_j.
+   Safe events touch disjoint circles (no races, no atomics on velocities); the earliest
+   event overall is always safe, so every round makes progress. Simultaneous safe events
+   touch disjoint circles and commute, so executing them together equals any serial order.
+
+The grid and the bounds assume every speed stays below vlim during the step. A collision
+that would exceed it (a light circle hit by a heavy one) is not executed: the step is redone
+up to that collision's time (the events before it are the same, by causality), and the next
+step rebuilds the grid for the new speeds.
+"""
+import taichi as ti
+
+from .geometry import NEVER, NO_EVENT, displacement, key_less, neighbour_cell
+
+ndarr = ti.types.ndarray(ndim=1)
+
+
+@ti.func
+def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), lo, hi, box, real: ti.template(), periodic: ti.template()):
+    """Time of impact of circles lo < hi, or NEVER; computed from lo's side only so both agree bit for bit."""
+    t0 = ti.max(tau[lo], tau[hi])
+    xl = pos[lo] + vel[lo] * (t0 - tau[lo])
+    xh = pos[hi] + vel[hi] * (t0 - tau[hi])
+    dx = displacement(xl, xh, box, periodic)
+    dv = vel[hi] - vel[lo]
+    s = radius[lo] + radius[hi]
+    b = dx.dot(dv)
+    t = ti.cast(NEVER, real)
+    if b < 0:
+        c = dx.dot(dx) - s * s
+        if c <= 0:
+            t = t0  # touching (or overlapping by round-off) and approaching: collide now
+        else:
+            a = dv.dot(dv)
+            disc = b * b - a * c
+            if disc > 0:
+                t = t0 + c / (-b + ti.sqrt(disc))  # the root without cancellation
+    return t
+
+
+@ti.kernel
+def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p: ndarr, dirty: ndarr,
+            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
+            box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
+            real: ti.template(), periodic: ti.template()) -> ti.f64:
+    scalars[0] = ti.cast(NEVER, real)
+    n = pos.shape[0]
+    box = ti.Vector([box_w, box_h], dt=real)
+    horizon = ti.cast(t_end, real)
+    for i in range(n):
+        if dirty[i] != 0:
+            dirty[i] = 0
+            ti_ = tau[i]
+            best_t = ti.cast(NEVER, real)
+            best_lo = n + 8
+            best_hi = n + 8
+            best_p = NO_EVENT
+            if ti.static(not periodic):
+                xi = pos[i]
+                vi = vel[i]
+                ri = radius[i]
+                for axis in ti.static(range(2)):
+                    t = ti.cast(NEVER, real)
+                    w = 0
+                    if vi[axis] < 0:
+                        t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
+                        w = 2 * axis
+                    elif vi[axis] > 0:
+                        t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
+                        w = 2 * axis + 1
+                    if t <= horizon and key_less(t, i, n + w, best_t, best_lo, best_hi):
+                        best_t, best_lo, best_hi, best_p = t, i, n + w, -1 - w
+            c = cell_of[i]
+            for a, b in ti.ndrange(sx, sy):
+                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+                if c2 >= 0:
+                    for k in range(cell_start[c2], cell_start[c2 + 1]):
+                        j = sorted_ids[k]
+                        if j != i:
+                            lo = ti.min(i, j)
+                            hi = ti.max(i, j)
+                            t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
+                            if t <= horizon and key_less(t, lo, hi, best_t, best_lo, best_hi):
+                                best_t, best_lo, best_hi, best_p = t, lo, hi, j
+            ev_t[i] = best_t
+            ev_p[i] = best_p
+    for i in range(n):
+        ti.atomic_min(scalars[0], ev_t[i])
+    return ti.cast(scalars[0], ti.f64)
+
+
+@ti.kernel
+def bound(pos: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d_in: ndarr, d_out: ndarr,
+          cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
+          box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, scalars: ndarr,
+          first: ti.template(), only_with_events: ti.template(), real: ti.template(), periodic: ti.template()):
+    n = pos.shape[0]
+    box = ti.Vector([box_w, box_h], dt=real)
+    horizon = ti.cast(t_end, real)
+    inv_two_v = ti.cast(0.5 / vlim, real)
+    v = ti.cast(vlim, real)
+    for k in range(n):
+        use = True
+        if ti.static(only_with_events):
+            use = ev_t[k] <= horizon
+        if use:
+            xk = pos[k]
+            rk = radius[k]
+            tk = tau[k]
+            dk = ti.cast(NEVER, real)
+            c = cell_of[k]
+            for a, b in ti.ndrange(sx, sy):
+                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+                if c2 >= 0:
+                    for m in range(cell_start[c2], cell_start[c2 + 1]):
+                        l = sorted_ids[m]
+                        if l != k:
+                            gap = displacement(xk, pos[l], box, periodic).norm() - rk - radius[l]
+                            reach = ti.max(ti.max(tk, tau[l]), (gap + v * (tk + tau[l])) * inv_two_v)
+                            dl = scalars[0]
+                            if ti.static(not first):
+                                dl = d_in[l]
+                            dk = ti.min(dk, ti.max(ti.min(ev_t[l], dl), reach))
+            d_out[k] = dk
+
+
+@ti.func
+def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+                          sorted_ids: ti.template(), ncx, ncy, sx, sy, periodic: ti.template()):
+    c = cell_of[i]
+    for a, b in ti.ndrange(sx, sy):
+        c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+        if c2 >= 0:
+            for k in range(cell_start[c2], cell_start[c2 + 1]):
+                dirty[sorted_ids[k]] = 1
+
+
+@ti.kernel
+def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ev_t: ndarr, ev_p: ndarr,
+            bound_t: ndarr, dirty: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
+            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
+            box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, t_offset: ti.f64, scalars: ndarr, counters: ndarr,
+            log_t: ndarr, log_i: ndarr, log_j: ndarr,
+            real: ti.template(), periodic: ti.template(), record: ti.template()) -> ti.i32:
+    n = pos.shape[0]
+    counters[0] = 0
+    box = ti.Vector([box_w, box_h], dt=real)
+    horizon = ti.cast(t_end, real)
+    vlim2 = ti.cast(vlim, real) ** 2
+    for i in range(n):
+        e = ev_t[i]
+        p = ev_p[i]
+        if e <= horizon and e <= bound_t[i]:
+            if p < 0 and p != NO_EVENT:
+                if ti.static(not periodic):
+                    w = -1 - p
+                    axis = w // 2
+                    x = pos[i] + vel[i] * (e - tau[i])
+                    v = vel[i]
+                    r = radius[i]
+                    # Place the circle exactly in contact: no round-off escape through the wall.
+                    if w % 2 == 0:
+                        x[axis] = r
+                    else:
+                        x[axis] = box[axis] - r
+                    vn = v[axis]
+                    v[axis] = -vn
+                    pos[i] = x
+                    vel[i] = v
+                    tau[i] = e
+                    wall_count[i] += 1
+                    wall_impulse[i] += 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                    ti.atomic_add(counters[0], 1)
+                    if ti.static(record):
+                        slot = ti.atomic_add(counters[1], 1)
+                        if slot < log_t.shape[0]:
+                            log_t[slot] = t_offset + ti.cast(e, ti.f64)
+                            log_i[slot] = i
+                            log_j[slot] = p
+            elif p > i and ev_p[p] == i and ev_t[p] == e and e <= bound_t[p]:
+                j = p
+                xi = pos[i] + vel[i] * (e - tau[i])
+                xj = pos[j] + vel[j] * (e - tau[j])
+                d = displacement(xi, xj, box, periodic)
+                nrm = d.normalized()
+                vi = vel[i]
+                vj = vel[j]
+                vn = (vj - vi).dot(nrm)
+                wi = inv_mass[i]
+                wj = inv_mass[j]
+                execute_it = True
+                if vn < 0:
+                    jmp = 2.0 * vn / (wi + wj)
+                    vi_new = vi + wi * jmp * nrm
+                    vj_new = vj - wj * jmp * nrm
+                    if (vi_new.norm_sqr() > vlim2 or vj_new.norm_sqr() > vlim2) and e < horizon:
+                        # Faster than the grid allows: end the step here (see module docstring).
+                        ti.atomic_min(scalars[1], e)
+                        execute_it = False
+                    else:
+                        vi = vi_new
+                        vj = vj_new
+                        pair_count[i] += 1
+                        virial[i] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+                        if ti.static(record):
+                            slot = ti.atomic_add(counters[1], 1)
+                            if slot < log_t.shape[0]:
+                                log_t[slot] = t_offset + ti.cast(e, ti.f64)
+                                log_i[slot] = i
+                                log_j[slot] = j
+                if execute_it:
+                    pos[i] = xi
+                    pos[j] = xj
+                    vel[i] = vi
+                    vel[j] = vj
+                    tau[i] = e
+                    tau[j] = e
+                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                    mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                    ti.atomic_add(counters[0], 1)
+    return counters[0]
+
+
+@ti.kernel
+def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
+           real: ti.template(), periodic: ti.template()):
+    box = ti.Vector([box_w, box_h], dt=real)
+    horizon = ti.cast(t_end, real)
+    for i in range(pos.shape[0]):
+        x = pos[i] + vel[i] * (horizon - tau[i])
+        if ti.static(periodic):
+            x -= box * ti.floor(x / box)
+            # x / box can round up to exactly 1 for x a hair below 0.
+            for a in ti.static(range(2)):
+                if x[a] >= box[a]:
+                    x[a] -= box[a]
+        pos[i] = x
+        tau[i] = 0.0

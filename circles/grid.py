@@ -1,0 +1,114 @@
+"""Uniform-grid broadphase rebuilt by counting sort.
+
+Stages: cell index and slot of each circle (one atomic add per circle), prefix sum of the
+counts (serial on the CPU), scatter of ids into `sorted_ids`. `cell_start[c]:cell_start[c+1]`
+then lists the circles of cell c. The slot order inside a cell depends on thread timing;
+nothing that feeds the state may depend on it, and nothing does (see geometry.key_less).
+
+The cell side is at least the requested reach, so the 3 x 3 block around a circle's cell
+holds every circle within that reach. The number of cells is capped (`max_cells`): when the
+box would need more, cells are made larger, never smaller than the reach.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from .geometry import span
+
+
+@ti.kernel
+def _count(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
+           slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
+           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template()):
+    for c in range(ncx * ncy):
+        cell_count[c] = 0
+    for i in range(pos.shape[0]):
+        use = True
+        if ti.static(masked):
+            use = include[i] != 0
+        if use:
+            p = pos[i]
+            # Positions may sit a round-off outside the box (or outside [0, W) in a
+            # periodic box before wrapping): clamp and wrap the cell coordinates.
+            cx = ti.cast(ti.floor(ti.cast(p[0], ti.f64) * inv_cw), ti.i32)
+            cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
+            cx = ti.min(ti.max(cx, 0), ncx - 1)
+            cy = ti.min(ti.max(cy, 0), ncy - 1)
+            c = cy * ncx + cx
+            cell_of[i] = c
+            slot[i] = ti.atomic_add(cell_count[c], 1)
+        else:
+            cell_of[i] = -1
+
+
+@ti.kernel
+def _prefix_and_scatter(cell_of: ti.types.ndarray(ndim=1), slot: ti.types.ndarray(ndim=1),
+                        cell_count: ti.types.ndarray(ndim=1), cell_start: ti.types.ndarray(ndim=1),
+                        sorted_ids: ti.types.ndarray(ndim=1), ncells: ti.i32):
+    cell_start[0] = 0
+    ti.loop_config(serialize=True)
+    for c in range(ncells):
+        cell_start[c + 1] = cell_start[c] + cell_count[c]
+    for i in range(cell_of.shape[0]):
+        c = cell_of[i]
+        if c >= 0:
+            sorted_ids[cell_start[c] + slot[i]] = i
+
+
+class Grid:
+    """Cell lists over a fixed number of circles, with a fixed cell capacity."""
+
+    def __init__(self, n: int, box, periodic: bool, max_cells=None):
+        self.n = n
+        self.box = (float(box[0]), float(box[1]))
+        self.periodic = periodic
+        self.max_cells = max_cells or max(64, 2 * n)
+        self.cell_of = ti.ndarray(ti.i32, shape=n)
+        self.slot = ti.ndarray(ti.i32, shape=n)
+        self.sorted_ids = ti.ndarray(ti.i32, shape=n)
+        self.cell_count = ti.ndarray(ti.i32, shape=self.max_cells)
+        self.cell_start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
+        self._dummy_mask = ti.ndarray(ti.i32, shape=1)
+        self.ncx = self.ncy = 1
+        self.reach = 0.0
+
+    def shape_for(self, reach: float):
+        """Cells per axis for cells at least `reach` wide, within the cell capacity."""
+        w, h = self.box
+        reach = max(reach, 1e-300)
+        ncx = max(1, min(int(w / reach), 1 << 20))
+        ncy = max(1, min(int(h / reach), 1 << 20))
+        while ncx * ncy > self.max_cells:
+            ncx = max(1, int(ncx / 1.5))
+            ncy = max(1, int(ncy / 1.5))
+        if self.periodic:
+            # Every cell must be at least `reach` wide also after wrapping: equal cells only.
+            pass
+        return ncx, ncy
+
+    def build(self, pos, reach, include=None):
+        """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
+        self.ncx, self.ncy = self.shape_for(reach)
+        self.reach = reach
+        w, h = self.box
+        masked = include is not None
+        _count(pos, include if masked else self._dummy_mask, self.cell_of, self.slot, self.cell_count,
+               self.ncx, self.ncy, self.ncx / w, self.ncy / h, masked)
+        _prefix_and_scatter(self.cell_of, self.slot, self.cell_count, self.cell_start, self.sorted_ids,
+                            self.ncx * self.ncy)
+
+    @property
+    def spans(self):
+        return span(self.ncx, self.periodic), span(self.ncy, self.periodic)
+
+    def args(self):
+        """The grid's arrays and sizes, in the order the scheme kernels take them."""
+        sx, sy = self.spans
+        return (self.cell_of, self.cell_start, self.sorted_ids, self.ncx, self.ncy, sx, sy)
+
+    def cells_numpy(self):
+        """(cell_of, cell_start, sorted_ids) as numpy arrays, for tests."""
+        ncells = self.ncx * self.ncy
+        return (self.cell_of.to_numpy(), self.cell_start.to_numpy()[: ncells + 1], self.sorted_ids.to_numpy())

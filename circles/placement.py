@@ -1,0 +1,199 @@
+"""Random non-overlapping placement, from a seed.
+
+Up to an area fraction of `RSA_LIMIT`: parallel random sequential addition. In each round
+every unplaced circle tries a few random positions against the circles already placed and
+proposes the first free one; a proposal that overlaps a proposal of a lower id is dropped,
+so the result does not depend on thread timing. Random numbers come from a counter-based
+hash of (seed, circle, attempt), not from a per-thread generator, for the same reason.
+
+Above it (RSA jams near 0.547 for equal disks): a hexagonal lattice whose spacing is the
+largest that fits, with every site jittered by at most half the free gap and the circles
+assigned to sites in a random order. The caller then melts it with the event scheme.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from .geometry import displacement, neighbour_cell
+from .grid import Grid
+
+ndarr = ti.types.ndarray(ndim=1)
+
+#: Area fraction up to which random sequential addition is used.
+RSA_LIMIT = 0.45
+#: Placed circles keep this relative clearance, so rounding to float32 never makes an overlap.
+CLEARANCE = 1e-6
+
+
+@ti.func
+def mix32(x):
+    """A 32-bit integer hash with good avalanche (lowbias32)."""
+    x ^= x >> ti.u32(16)
+    x *= ti.u32(0x7FEB352D)
+    x ^= x >> ti.u32(15)
+    x *= ti.u32(0x846CA68B)
+    x ^= x >> ti.u32(16)
+    return x
+
+
+@ti.func
+def uniform(seed, i, k):
+    """A float64 in [0, 1) from the counters (seed, i, k)."""
+    h = mix32(ti.cast(seed, ti.u32) ^ mix32(ti.cast(i, ti.u32) ^ mix32(ti.cast(k, ti.u32) * ti.u32(0x9E3779B9))))
+    return ti.cast(h, ti.f64) * (1.0 / 4294967296.0)
+
+
+@ti.kernel
+def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: ti.i32, first_draw: ti.i32,
+             attempts: ti.i32, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+             sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template()):
+    box = ti.Vector([box_w, box_h], dt=ti.f64)
+    for i in range(pos.shape[0]):
+        proposing[i] = 0
+        if placed[i] == 0:
+            r = ti.cast(radius[i], ti.f64)
+            for k in range(attempts):
+                draw = first_draw + 2 * k
+                u = ti.Vector([uniform(seed, i, draw), uniform(seed, i, draw + 1)])
+                x = u * box
+                if ti.static(not periodic):
+                    x = r + u * (box - 2.0 * r)
+                cx = ti.min(ti.max(ti.cast(ti.floor(x[0] / box_w * ncx), ti.i32), 0), ncx - 1)
+                cy = ti.min(ti.max(ti.cast(ti.floor(x[1] / box_h * ncy), ti.i32), 0), ncy - 1)
+                c = cy * ncx + cx
+                free = True
+                for a, b in ti.ndrange(sx, sy):
+                    c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+                    if c2 >= 0:
+                        for m in range(cell_start[c2], cell_start[c2 + 1]):
+                            j = sorted_ids[m]
+                            s = (r + ti.cast(radius[j], ti.f64)) * (1.0 + CLEARANCE)
+                            d = displacement(x, ti.cast(pos[j], ti.f64), box, periodic)
+                            if d.dot(d) < s * s:
+                                free = False
+                if free:
+                    pos[i] = x
+                    proposing[i] = 1
+                    break
+
+
+@ti.kernel
+def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of: ndarr, cell_start: ndarr,
+            sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64,
+            periodic: ti.template()) -> ti.i32:
+    box = ti.Vector([box_w, box_h], dt=ti.f64)
+    accepted = 0
+    for i in range(pos.shape[0]):
+        if proposing[i] != 0:
+            ok = True
+            c = cell_of[i]
+            xi = ti.cast(pos[i], ti.f64)
+            for a, b in ti.ndrange(sx, sy):
+                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+                if c2 >= 0:
+                    for m in range(cell_start[c2], cell_start[c2 + 1]):
+                        j = sorted_ids[m]
+                        if j < i:
+                            s = ti.cast(radius[i] + radius[j], ti.f64) * (1.0 + CLEARANCE)
+                            d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic)
+                            if d.dot(d) < s * s:
+                                ok = False
+            if ok:
+                placed[i] = 1
+                accepted += 1
+    return accepted
+
+
+def random_sequential(radius: np.ndarray, box, periodic: bool, seed: int, max_rounds: int = 400):
+    """Positions (n, 2) float64 by parallel random sequential addition, or None if it jams."""
+    n = radius.shape[0]
+    rad = ti.ndarray(ti.f64, shape=n)
+    rad.from_numpy(radius.astype(np.float64))
+    pos = ti.Vector.ndarray(2, ti.f64, shape=n)
+    placed = ti.ndarray(ti.i32, shape=n)
+    proposing = ti.ndarray(ti.i32, shape=n)
+    grid = Grid(n, box, periodic)
+    reach = 2.0 * float(radius.max()) * (1.0 + 2 * CLEARANCE)
+    remaining = n
+    draw = 0
+    seed32 = int(seed) & 0x7FFFFFFF
+    for _ in range(max_rounds):
+        # Few circles left: give each more tries per round (each round costs two grid builds).
+        attempts = 1 if remaining > n // 4 else (4 if remaining > n // 64 else 16)
+        grid.build(pos, reach, include=placed)
+        _propose(pos, rad, placed, proposing, seed32, draw, attempts, *grid.args(), box[0], box[1], periodic)
+        draw += 2 * attempts
+        grid.build(pos, reach, include=proposing)
+        remaining -= _settle(pos, rad, placed, proposing, *grid.args(), box[0], box[1], periodic)
+        if remaining == 0:
+            return pos.to_numpy()
+    return None
+
+
+def _lattice_shape(n, usable_w, usable_h, periodic):
+    """(nx, ny, ax, ay, spacing): the hexagonal-like lattice of >= n sites with the largest nearest distance."""
+    best = None
+    ny_max = max(1, int(math.sqrt(n * max(usable_h, 1e-300) / max(usable_w, 1e-300) * 2)) + 3)
+    for ny in range(1, min(n, ny_max * 2) + 1):
+        nx = -(-n // ny)
+        if periodic:
+            ax, ay = usable_w / nx, usable_h / ny
+            d = min(ax, math.hypot(ax / 2, ay) if ny > 1 else math.inf, ay if ny % 2 else math.inf)
+            if ny == 1:
+                d = min(ax, usable_h)
+        else:
+            if ny == 1:
+                ax = usable_w / (nx - 1) if nx > 1 else math.inf
+                ay = math.inf
+                d = ax
+            else:
+                ax = usable_w / (nx - 0.5) if nx > 1 else math.inf
+                ay = usable_h / (ny - 1)
+                d = min(ax, math.hypot(ax / 2, ay))
+        if best is None or d > best[4]:
+            best = (nx, ny, ax, ay, d)
+    return best
+
+
+def hexagonal(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator):
+    """Positions (n, 2) on a jittered hexagonal lattice, or raise ValueError if none fits."""
+    n = radius.shape[0]
+    w, h = box
+    rmax = float(radius.max())
+    need = 2.0 * rmax * (1.0 + 4 * CLEARANCE)
+    uw, uh = (w, h) if periodic else (w - 2 * rmax, h - 2 * rmax)
+    nx, ny, ax, ay, spacing = _lattice_shape(n, uw, uh, periodic)
+    if spacing < need:
+        fraction = float(np.sum(np.pi * radius ** 2)) / (w * h)
+        raise ValueError(f"cannot place {n} circles of radius up to {rmax} in a {w} x {h} box "
+                         f"(area fraction {fraction:.4f}): the best lattice leaves {spacing:.6g} between centres, "
+                         f"below the largest diameter {2 * rmax:.6g}; use fewer or smaller circles or a bigger box")
+    rows = np.repeat(np.arange(ny), nx)
+    cols = np.tile(np.arange(nx), ny)
+    shift = 0.5 * (rows % 2)
+    if periodic:
+        xs, ys = (cols + shift) * ax, rows * ay
+    else:
+        x0 = rmax
+        xs = x0 + (cols + shift) * (ax if np.isfinite(ax) else 0.0)
+        ys = rmax + rows * (ay if np.isfinite(ay) else 0.0)
+        if ny == 1:
+            ys = np.full_like(xs, h / 2)
+        if nx == 1:
+            xs = np.full_like(ys, w / 2)
+    sites = np.stack([xs, ys], axis=1)
+    chosen = sites[rng.permutation(len(sites))[:n]]
+    # A jitter of at most half the free gap per circle keeps every pair apart.
+    amp = 0.5 * min(spacing - need, spacing) if np.isfinite(spacing) else 0.0
+    ang = rng.uniform(0, 2 * np.pi, n)
+    mag = amp * np.sqrt(rng.uniform(0, 1, n))
+    pos = chosen + np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=1)
+    if periodic:
+        pos %= np.array([w, h])
+    else:
+        # Clipping towards the site keeps each circle within `amp` of it, so still apart.
+        pos[:, 0] = np.clip(pos[:, 0], radius, w - radius)
+        pos[:, 1] = np.clip(pos[:, 1], radius, h - radius)
+    return pos

@@ -1,0 +1,67 @@
+"""Whole-array kernels: largest speed with a finiteness check, largest overlap, copies."""
+import taichi as ti
+
+from .geometry import displacement, neighbour_cell
+
+ndarr = ti.types.ndarray(ndim=1)
+
+
+@ti.kernel
+def max_speed(pos: ndarr, vel: ndarr, out: ndarr):
+    """out[0] = largest |v|; out[1] = number of circles with a non-finite position or velocity."""
+    out[0] = 0.0
+    out[1] = 0.0
+    for i in range(pos.shape[0]):
+        p = ti.cast(pos[i], ti.f64)
+        v = ti.cast(vel[i], ti.f64)
+        s = v.norm()
+        bad = False
+        for a in ti.static(range(2)):
+            # x - x is 0 for finite x and NaN for NaN or +-Inf.
+            if not (p[a] - p[a] == 0.0) or not (v[a] - v[a] == 0.0):
+                bad = True
+        if bad:
+            ti.atomic_add(out[1], 1.0)
+        else:
+            ti.atomic_max(out[0], s)
+
+
+@ti.kernel
+def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
+                ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, out: ndarr,
+                periodic: ti.template()) -> ti.f64:
+    """Largest (r_i + r_j - d_ij) / (r_i + r_j) over all pairs, 0 when none overlap."""
+    box = ti.Vector([box_w, box_h], dt=ti.f64)
+    out[0] = 0.0
+    for i in range(pos.shape[0]):
+        c = cell_of[i]
+        xi = ti.cast(pos[i], ti.f64)
+        for a, b in ti.ndrange(sx, sy):
+            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+            if c2 >= 0:
+                for k in range(cell_start[c2], cell_start[c2 + 1]):
+                    j = sorted_ids[k]
+                    if j > i:
+                        s = ti.cast(radius[i] + radius[j], ti.f64)
+                        d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
+                        if d < s:
+                            ti.atomic_max(out[0], (s - d) / s)
+    return out[0]
+
+
+@ti.kernel
+def copy_vec(src: ndarr, dst: ndarr):
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def fill_i32(dst: ndarr, value: ti.i32):
+    for i in range(dst.shape[0]):
+        dst[i] = value
+
+
+@ti.kernel
+def fill_real(dst: ndarr, value: ti.f64):
+    for i in range(dst.shape[0]):
+        dst[i] = value

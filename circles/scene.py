@@ -1,0 +1,175 @@
+"""Scene: the static description of a run (what is simulated, not how far it has got).
+
+Every field is checked when the Scene is made, so a bad value fails before any work with a
+message that names the value, the limit and the fix.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields, asdict
+from numbers import Integral, Real
+
+MASS_MODELS = ("radius", "area", "equal")
+BOUNDARIES = ("walls", "periodic")
+SCHEMES = ("event", "discrete")
+PRECISIONS = ("f32", "f64")
+
+#: Densest packing of equal disks in the plane (hexagonal), pi / sqrt(12).
+DENSEST_PACKING = math.pi / math.sqrt(12.0)
+
+
+def _finite(name, value):
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ValueError(f"{name} = {value!r} is not a number")
+    if not math.isfinite(float(value)):
+        raise ValueError(f"{name} = {value!r} is not finite: give a finite number")
+    return float(value)
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name} {value!r} is unknown: use one of {', '.join(map(repr, allowed))}")
+    return value
+
+
+def check_box(box):
+    try:
+        w, h = box
+    except (TypeError, ValueError):
+        raise ValueError(f"box = {box!r} must be a pair (W, H)") from None
+    w, h = _finite("box width", w), _finite("box height", h)
+    if w <= 0 or h <= 0:
+        raise ValueError(f"box = ({w}, {h}): both sides must be > 0")
+    return w, h
+
+
+def check_pair_range(name, value, lower_ok):
+    """A scalar or a (low, high) pair, returned as (low, high)."""
+    if isinstance(value, Real) and not isinstance(value, bool):
+        lo = hi = _finite(name, value)
+    else:
+        try:
+            lo, hi = value
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} = {value!r} must be a number or a pair (min, max)") from None
+        lo, hi = _finite(name, lo), _finite(name, hi)
+    if not lower_ok(lo):
+        raise ValueError(f"{name} = {value!r}: the smallest value {lo} is out of range "
+                         f"({'must be > 0' if name == 'radius' else 'must be >= 0'})")
+    if hi < lo:
+        raise ValueError(f"{name} = {value!r}: max {hi} is below min {lo}")
+    return lo, hi
+
+
+def check_dt(dt):
+    if dt is None:
+        return None
+    dt = _finite("dt", dt)
+    if dt <= 0:
+        raise ValueError(f"dt = {dt} must be > 0 (or None to choose it from the scene)")
+    return dt
+
+
+def check_fits(rmax, box, boundary):
+    w, h = box
+    if boundary == "walls" and 2 * rmax > min(w, h):
+        raise ValueError(f"radius {rmax} is larger than the box {w} x {h} allows "
+                         f"(diameter {2 * rmax} > side {min(w, h)}): use smaller circles or a bigger box")
+    if boundary == "periodic" and 4 * rmax >= min(w, h):
+        raise ValueError(f"radius {rmax} is too large for the periodic box {w} x {h}: each side must exceed "
+                         f"two diameters ({4 * rmax}) so a circle never meets two images of one neighbour; "
+                         "use smaller circles or a bigger box")
+
+
+def check_area_fraction(fraction, n, box):
+    if fraction > DENSEST_PACKING:
+        raise ValueError(f"area fraction {fraction:.4f} of {n} circles in a {box[0]} x {box[1]} box exceeds "
+                         f"the densest packing {DENSEST_PACKING:.4f}: use fewer or smaller circles or a bigger box")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What is simulated. Units are world units (box [0, W] x [0, H], y up) and seconds.
+
+    n: number of circles. box: (W, H). radius: r or (rmin, rmax), uniform in the range.
+    speed: (vmin, vmax), uniform speeds in random directions. mass: "radius" (m = r, the
+    default), "area" (m = r^2) or "equal" (m = 1). boundary: "walls" or "periodic".
+    scheme: "event" (exact) or "discrete" (fast, approximate). precision: "f32" or "f64".
+    dt: step length in simulated seconds, None to choose it from the scene. seed: int.
+    """
+
+    n: int = 10_000
+    box: tuple = (16.0, 9.0)
+    radius: tuple | float = (0.02, 0.05)
+    speed: tuple = (0.5, 1.0)
+    mass: str = "radius"
+    boundary: str = "walls"
+    scheme: str = "event"
+    precision: str = "f64"
+    dt: float | None = None
+    seed: int = 0
+
+    def __post_init__(self):
+        if isinstance(self.n, bool) or not isinstance(self.n, Integral):
+            raise ValueError(f"n = {self.n!r} must be a whole number of circles")
+        if self.n <= 0:
+            raise ValueError(f"n = {self.n} must be > 0")
+        box = check_box(self.box)
+        rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
+        vlo, vhi = check_pair_range("speed", self.speed, lambda v: v >= 0)
+        _choice("mass model", self.mass, MASS_MODELS)
+        _choice("boundary", self.boundary, BOUNDARIES)
+        _choice("scheme", self.scheme, SCHEMES)
+        _choice("precision", self.precision, PRECISIONS)
+        dt = check_dt(self.dt)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
+            raise ValueError(f"seed = {self.seed!r} must be a whole number >= 0")
+        check_fits(rhi, box, self.boundary)
+        check_area_fraction(self.expected_area_fraction_of(self.n, box, rlo, rhi), self.n, box)
+        object.__setattr__(self, "n", int(self.n))
+        object.__setattr__(self, "box", box)
+        object.__setattr__(self, "radius", (rlo, rhi))
+        object.__setattr__(self, "speed", (vlo, vhi))
+        object.__setattr__(self, "dt", dt)
+        object.__setattr__(self, "seed", int(self.seed))
+
+    @staticmethod
+    def expected_area_fraction_of(n, box, rlo, rhi):
+        mean_r2 = (rlo * rlo + rlo * rhi + rhi * rhi) / 3.0  # E[r^2] for r uniform in [rlo, rhi]
+        return n * math.pi * mean_r2 / (box[0] * box[1])
+
+    @property
+    def area_fraction(self) -> float:
+        """Expected area fraction of the circles (exact for equal radii)."""
+        return self.expected_area_fraction_of(self.n, self.box, *self.radius)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["box"] = list(self.box)
+        d["radius"] = list(self.radius)
+        d["speed"] = list(self.speed)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Scene":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown scene key(s) {', '.join(unknown)}: known keys are {', '.join(sorted(known))}")
+        kw = dict(d)
+        for key in ("box", "radius", "speed"):
+            if isinstance(kw.get(key), list):
+                kw[key] = tuple(kw[key])
+        return cls(**kw)
+
+    @classmethod
+    def from_toml(cls, path) -> "Scene":
+        """Read a scene from TOML: the Scene fields at top level; a [run] table (for the command line) is ignored."""
+        with open(path, "rb") as f:
+            try:
+                d = tomllib.load(f)
+            except tomllib.TOMLDecodeError as e:
+                raise ValueError(f"{path}: not valid TOML ({e})") from None
+        d.pop("run", None)
+        return cls.from_dict(d)

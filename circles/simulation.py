@@ -1,0 +1,469 @@
+"""Simulation: the time-varying state of a scene and the stepper that advances it.
+
+A step of the event scheme reads as its stages: largest speed, grid, backup, then rounds
+of predict / bound / bound / execute until no event is left before the step's end, then
+every circle advances to the end (see `circles.event`). A step of the discrete scheme:
+move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from . import discrete, event, placement, reductions
+from .backend import ensure_init
+from .geometry import NEVER
+from .grid import Grid
+from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
+                    check_box, check_dt, check_fits)
+
+#: Speeds may grow by this factor within an event step before the step is cut short.
+SPEED_MARGIN = 1.25
+#: Default event-scheme step: the fastest circle moves this many largest radii per step.
+EVENT_STEP_RADII = 1.0
+#: Default discrete-scheme step: the fastest circle moves this fraction of the smallest radius.
+DISCRETE_STEP_FRACTION = 0.2
+#: Rounds of pair resolution per discrete step; what is left stays for the next step.
+DISCRETE_MAX_ROUNDS = 16
+#: A lattice start is melted until circles have had this many collisions each on average.
+MELT_COLLISIONS_PER_CIRCLE = 20
+#: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
+INPUT_OVERLAP_TOLERANCE = 1e-9
+
+_REAL = {"f32": ti.f32, "f64": ti.f64}
+_NP_REAL = {"f32": np.float32, "f64": np.float64}
+
+
+@dataclass
+class State:
+    """A copy of the state in creation order.
+
+    pos (n, 2) and vel (n, 2): world units and units per second, float64.
+    radius (n,), mass (n,): float64. color (n, 3): uint8 RGB.
+    """
+
+    pos: np.ndarray
+    vel: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    color: np.ndarray
+
+
+def masses_for(model, radius):
+    if isinstance(model, str):
+        _choice("mass model", model, MASS_MODELS)
+        if model == "radius":
+            return radius.copy()
+        if model == "area":
+            return np.pi * radius * radius
+        return np.ones_like(radius)
+    mass = np.asarray(model, dtype=np.float64)
+    if mass.shape != radius.shape:
+        raise ValueError(f"mass has shape {mass.shape}, expected ({radius.shape[0]},): one mass per circle")
+    if not np.all(np.isfinite(mass)) or np.any(mass <= 0):
+        bad = mass[~(np.isfinite(mass) & (mass > 0))][0]
+        raise ValueError(f"mass {bad} must be finite and > 0")
+    return mass
+
+
+def random_colors(n, rng):
+    return rng.integers(48, 256, size=(n, 3), dtype=np.uint8)
+
+
+def default_dt(scheme, radius, vel):
+    vmax = float(np.sqrt((vel * vel).sum(axis=1)).max()) if len(vel) else 0.0
+    if vmax <= 0:
+        return 1.0
+    if scheme == "event":
+        return EVENT_STEP_RADII * float(radius.max()) / vmax
+    return DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
+
+
+class Simulation:
+    """Circles in a box, advanced in fixed steps of simulated time."""
+
+    def __init__(self, scene: Scene, *, record_events: int = 0):
+        if not isinstance(scene, Scene):
+            raise TypeError(f"Simulation takes a circles.Scene, not {type(scene).__name__}")
+        ensure_init()
+        rng = np.random.default_rng(scene.seed)
+        n = scene.n
+        (rlo, rhi), (vlo, vhi) = scene.radius, scene.speed
+        radius = rng.uniform(rlo, rhi, n) if rhi > rlo else np.full(n, rlo)
+        speed = rng.uniform(vlo, vhi, n) if vhi > vlo else np.full(n, vlo)
+        angle = rng.uniform(0.0, 2.0 * np.pi, n)
+        vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
+        color = random_colors(n, rng)
+        mass = masses_for(scene.mass, radius)
+        fraction = float(np.sum(np.pi * radius ** 2)) / (scene.box[0] * scene.box[1])
+        check_area_fraction(fraction, n, scene.box)
+        periodic = scene.boundary == "periodic"
+        pos = None
+        if fraction <= placement.RSA_LIMIT:
+            pos = placement.random_sequential(radius, scene.box, periodic, scene.seed)
+        melt = pos is None
+        if melt:
+            pos = placement.hexagonal(radius, scene.box, periodic, rng)
+        self.scene = scene
+        self._setup(pos, vel, radius, mass, color, scene.box, scene.boundary, scene.scheme, scene.precision,
+                    scene.dt, record_events, need_event=melt)
+        if melt:
+            self._melt(rng)
+
+    @classmethod
+    def from_arrays(cls, pos, vel, radius, mass=None, box=(1.0, 1.0), boundary="walls", scheme="event",
+                    precision="f64", dt=None, *, color=None, record_events: int = 0) -> "Simulation":
+        """A simulation of given circles. mass: None (proportional to radius), a model name or (n,) masses."""
+        ensure_init()
+        box = check_box(box)
+        _choice("boundary", boundary, BOUNDARIES)
+        _choice("scheme", scheme, SCHEMES)
+        _choice("precision", precision, PRECISIONS)
+        dt = check_dt(dt)
+        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
+        n = radius.shape[0]
+        if n == 0:
+            raise ValueError("n = 0 circles: give at least one")
+        pos = np.asarray(pos, dtype=np.float64)
+        vel = np.asarray(vel, dtype=np.float64)
+        for name, arr in (("pos", pos), ("vel", vel)):
+            if arr.shape != (n, 2):
+                raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2) for {n} radii")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} holds a non-finite value {arr[~np.isfinite(arr)][0]}")
+        if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
+            raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
+        check_fits(float(radius.max()), box, boundary)
+        mass = masses_for("radius" if mass is None else mass, radius)
+        w, h = box
+        if boundary == "walls":
+            out = (pos[:, 0] < radius) | (pos[:, 0] > w - radius) | (pos[:, 1] < radius) | (pos[:, 1] > h - radius)
+            if np.any(out):
+                i = int(np.flatnonzero(out)[0])
+                raise ValueError(f"circle {i} at {tuple(pos[i])} with radius {radius[i]} is not inside the walls "
+                                 f"[0, {w}] x [0, {h}]: move it inside")
+        else:
+            pos = pos % np.array([w, h])
+        if color is None:
+            color = random_colors(n, np.random.default_rng(0))
+        color = np.asarray(color, dtype=np.uint8).reshape(n, 3)
+        check_area_fraction(float(np.sum(np.pi * radius ** 2)) / (w * h), n, box)
+        sim = cls.__new__(cls)
+        sim.scene = None
+        sim._setup(pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events)
+        overlap = sim._max_overlap()
+        if overlap > INPUT_OVERLAP_TOLERANCE:
+            raise ValueError(f"circles overlap by {overlap:.3g} of their contact distance (tolerance "
+                             f"{INPUT_OVERLAP_TOLERANCE}): place them apart or in contact")
+        return sim
+
+    # ----------------------------------------------------------------- set-up
+    def _setup(self, pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events,
+               need_event=False):
+        n = radius.shape[0]
+        self.n = n
+        self.box = (float(box[0]), float(box[1]))
+        self.boundary, self.scheme, self.precision = boundary, scheme, precision
+        self.periodic = boundary == "periodic"
+        self._real = _REAL[precision]
+        self._np_real = _NP_REAL[precision]
+        self.dt = float(dt) if dt is not None else default_dt(scheme, radius, vel)
+        self.time = 0.0
+        self.steps = 0
+        self.rounds = 0
+        self.redone_steps = 0
+        self._mass = np.asarray(mass, dtype=np.float64).copy()
+        self._radius = np.asarray(radius, dtype=np.float64).copy()
+        self._color = np.asarray(color, dtype=np.uint8).copy()
+        self._rmax = float(self._radius.max())
+        self._rmin = float(self._radius.min())
+        real = self._real
+        self.pos = ti.Vector.ndarray(2, real, shape=n)
+        self.vel = ti.Vector.ndarray(2, real, shape=n)
+        self.radius = ti.ndarray(real, shape=n)
+        self.inv_mass = ti.ndarray(real, shape=n)
+        self.pos.from_numpy(np.asarray(pos, dtype=self._np_real))
+        self.vel.from_numpy(np.asarray(vel, dtype=self._np_real))
+        self.radius.from_numpy(self._radius.astype(self._np_real))
+        self.inv_mass.from_numpy((1.0 / self._mass).astype(self._np_real))
+        # Per-circle sums (a pair counts on its lower id): summed in a fixed order by stats(),
+        # so they are the same whatever the thread count.
+        self.pair_count = ti.ndarray(ti.i32, shape=n)
+        self.wall_count = ti.ndarray(ti.i32, shape=n)
+        self.virial = ti.ndarray(ti.f64, shape=n)
+        self.wall_impulse = ti.ndarray(ti.f64, shape=n)
+        for arr in (self.pair_count, self.wall_count):
+            reductions.fill_i32(arr, 0)
+        for arr in (self.virial, self.wall_impulse):
+            reductions.fill_real(arr, 0.0)
+        self.grid = Grid(n, self.box, self.periodic)
+        self._speed_out = ti.ndarray(ti.f64, shape=2)
+        self._overlap_out = ti.ndarray(ti.f64, shape=1)
+        self._counters = ti.ndarray(ti.i32, shape=2)
+        self._scalars = ti.ndarray(real, shape=2)
+        reductions.fill_i32(self._counters, 0)
+        self._record_cap = int(record_events)
+        cap = max(1, self._record_cap)
+        self._log_t = ti.ndarray(ti.f64, shape=cap)
+        self._log_i = ti.ndarray(ti.i32, shape=cap)
+        self._log_j = ti.ndarray(ti.i32, shape=cap)
+        self._event_arrays = False
+        if scheme == "event" or need_event:
+            self._alloc_event_arrays()
+        if scheme == "discrete":
+            self._partner = ti.ndarray(ti.i32, shape=n)
+            self._key = ti.ndarray(real, shape=n)
+
+    def _alloc_event_arrays(self):
+        if self._event_arrays:
+            return
+        n, real = self.n, self._real
+        self.tau = ti.ndarray(real, shape=n)
+        reductions.fill_real(self.tau, 0.0)
+        self._ev_t = ti.ndarray(real, shape=n)
+        self._ev_p = ti.ndarray(ti.i32, shape=n)
+        self._dirty = ti.ndarray(ti.i32, shape=n)
+        self._d1 = ti.ndarray(real, shape=n)
+        self._d2 = ti.ndarray(real, shape=n)
+        self._backup = {name: self._like(getattr(self, name))
+                        for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
+        self._event_arrays = True
+
+    @staticmethod
+    def _like(arr):
+        """A new ndarray of the same kind, element type and shape."""
+        if isinstance(arr, ti.VectorNdarray):
+            return ti.Vector.ndarray(arr.n, arr.dtype, shape=arr.shape)
+        return ti.ndarray(arr.dtype, shape=arr.shape)
+
+    def _melt(self, rng):
+        """Run the event scheme from the lattice until it is forgotten, then restore the start velocities."""
+        start_vel = self.vel.to_numpy()
+        speeds = np.sqrt((start_vel.astype(np.float64) ** 2).sum(axis=1))
+        if speeds.max() <= 0:
+            angle = rng.uniform(0.0, 2.0 * np.pi, self.n)
+            self.vel.from_numpy(np.stack([np.cos(angle), np.sin(angle)], axis=1).astype(self._np_real))
+        vmax = float(np.sqrt((self.vel.to_numpy().astype(np.float64) ** 2).sum(axis=1)).max())
+        # Gaps in a dense lattice are a small fraction of a radius: step a few gaps at a time.
+        h = 0.25 * self._rmax / vmax
+        target = MELT_COLLISIONS_PER_CIRCLE * self.n
+        for _ in range(100_000):
+            if self._pair_collisions() >= target:
+                break
+            self._event_step(h)
+        self.vel.from_numpy(start_vel)
+        for arr in (self.pair_count, self.wall_count):
+            reductions.fill_i32(arr, 0)
+        for arr in (self.virial, self.wall_impulse):
+            reductions.fill_real(arr, 0.0)
+        reductions.fill_i32(self._counters, 0)
+        self.time, self.steps, self.rounds, self.redone_steps = 0.0, 0, 0, 0
+
+    # ---------------------------------------------------------------- stepping
+    def advance(self, duration: float):
+        """Advance by `duration` of simulated time, ending exactly at the old time + duration."""
+        duration = float(duration)
+        if not math.isfinite(duration) or duration < 0:
+            raise ValueError(f"duration {duration} must be finite and >= 0")
+        end = self.time + duration
+        while self.time < end:
+            h = min(self.dt, end - self.time)
+            self.time += self._step(h)
+            self.steps += 1
+        self.time = end
+        self._check_finite()
+        return self
+
+    def step(self, k: int = 1):
+        """Take k steps of length dt."""
+        if int(k) != k or k < 0:
+            raise ValueError(f"k = {k} must be a whole number >= 0")
+        for _ in range(int(k)):
+            done = 0.0
+            while done < self.dt:
+                done += self._step(self.dt - done)
+            self.time += self.dt
+            self.steps += 1
+        self._check_finite()
+        return self
+
+    def _step(self, h):
+        if self.scheme == "event":
+            return self._event_step(h)
+        return self._discrete_step(h)
+
+    def _max_speed(self):
+        reductions.max_speed(self.pos, self.vel, self._speed_out)
+        vmax, bad = self._speed_out.to_numpy()
+        if bad:
+            raise FloatingPointError(f"{int(bad)} circles have a non-finite position or velocity at time "
+                                     f"{self.time}: the state is broken, the run stops here")
+        return float(vmax)
+
+    def _check_finite(self):
+        self._max_speed()
+
+    def _box_args(self):
+        return self.box[0], self.box[1]
+
+    def _event_step(self, h):
+        """One step of the event scheme over [0, h]; returns the simulated time covered (h, or less when cut)."""
+        vmax = self._max_speed()
+        w, hgt = self.box
+        if vmax == 0.0:
+            return h
+        vlim = vmax * SPEED_MARGIN
+        reach = 2.0 * self._rmax + 2.0 * vlim * h
+        if self.periodic:
+            # The nearest image must be the only one within reach during the step.
+            limit = 0.5 * min(w, hgt)
+            if reach > limit:
+                h = (limit - 2.0 * self._rmax) / (2.0 * vlim)
+                reach = limit
+        self.grid.build(self.pos, reach)
+        g = self.grid.args()
+        real, periodic, record = self._real, self.periodic, self._record_cap > 0
+        for name, arr in self._backup.items():
+            reductions.copy_vec(getattr(self, name), arr)
+        log_count = int(self._counters.to_numpy()[1])
+        t_end = h
+        reductions.fill_i32(self._dirty, 1)
+        self._set_scalars(NEVER, NEVER)
+        while True:
+            tmin = event.predict(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._ev_p, self._dirty,
+                                 *g, w, hgt, t_end, self._scalars, real, periodic)
+            if tmin > t_end:
+                break
+            event.bound(self.pos, self.radius, self.tau, self._ev_t, self._d2, self._d1, *g, w, hgt, t_end, vlim,
+                        self._scalars, True, False, real, periodic)
+            event.bound(self.pos, self.radius, self.tau, self._ev_t, self._d1, self._d2, *g, w, hgt, t_end, vlim,
+                        self._scalars, False, True, real, periodic)
+            executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self._ev_t, self._ev_p,
+                                     self._d2, self._dirty, self.pair_count, self.wall_count, self.virial,
+                                     self.wall_impulse, *g, w, hgt, t_end, vlim, self.time, self._scalars,
+                                     self._counters, self._log_t, self._log_i, self._log_j, real, periodic, record)
+            self.rounds += 1
+            cut = float(self._scalars.to_numpy()[1])
+            if cut < t_end:
+                # A collision would outrun the grid: redo the step up to it (see circles.event).
+                for name, arr in self._backup.items():
+                    reductions.copy_vec(arr, getattr(self, name))
+                reductions.fill_real(self.tau, 0.0)
+                reductions.fill_i32(self._dirty, 1)
+                self._set_counter(1, log_count)
+                self._set_scalars(NEVER, NEVER)
+                t_end = cut
+                self.redone_steps += 1
+                continue
+            if executed == 0:
+                raise RuntimeError(f"event rounds made no progress at step time {tmin} (internal error)")
+        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
+        return t_end
+
+    def _discrete_step(self, h):
+        w, hgt = self.box
+        real, periodic = self._real, self.periodic
+        discrete.move(self.pos, self.vel, h, w, hgt, real, periodic)
+        self.grid.build(self.pos, 2.0 * self._rmax)
+        g = self.grid.args()
+        for _ in range(DISCRETE_MAX_ROUNDS):
+            discrete.pick(self.pos, self.vel, self.radius, self._partner, self._key, *g, w, hgt, self._counters,
+                          real, periodic)
+            discrete.resolve(self.pos, self.vel, self.radius, self.inv_mass, self._partner, self.pair_count,
+                             self.virial, w, hgt, self._counters, real, periodic)
+            self.rounds += 1
+            if self._counters.to_numpy()[0] == 0:
+                break
+        if not periodic:
+            discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
+                           w, hgt, real)
+        return h
+
+    def _set_scalars(self, a, b):
+        self._scalars.from_numpy(np.array([a, b], dtype=self._np_real))
+
+    def _set_counter(self, k, value):
+        c = self._counters.to_numpy()
+        c[k] = value
+        self._counters.from_numpy(c)
+
+    # --------------------------------------------------------------- read-out
+    def _pair_collisions(self):
+        return int(self.pair_count.to_numpy().sum(dtype=np.int64))
+
+    def _max_overlap(self):
+        self.grid.build(self.pos, 2.0 * self._rmax)
+        return float(reductions.max_overlap(self.pos, self.radius, *self.grid.args(), self.box[0], self.box[1],
+                                            self._overlap_out, self.periodic))
+
+    def state(self) -> State:
+        return State(pos=self.pos.to_numpy().astype(np.float64), vel=self.vel.to_numpy().astype(np.float64),
+                     radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy())
+
+    def stats(self) -> dict:
+        """Totals since the start; sums in float64 (see DESIGN.md for the pressure formulas)."""
+        vel = self.vel.to_numpy().astype(np.float64)
+        m = self._mass
+        return {
+            "time": self.time,
+            "kinetic_energy": float(0.5 * np.sum(m * (vel[:, 0] ** 2 + vel[:, 1] ** 2))),
+            "momentum": (float(np.sum(m * vel[:, 0])), float(np.sum(m * vel[:, 1]))),
+            "pair_collisions": self._pair_collisions(),
+            "wall_collisions": int(self.wall_count.to_numpy().sum(dtype=np.int64)),
+            "virial": float(np.sum(self.virial.to_numpy())),
+            "wall_impulse": float(np.sum(self.wall_impulse.to_numpy())),
+            "max_overlap": self._max_overlap(),
+        }
+
+    def events(self) -> np.ndarray:
+        """Executed collisions (time, i, j) sorted, when made with record_events > 0 (see INTERFACE)."""
+        if self._record_cap <= 0:
+            raise RuntimeError("events are recorded only with record_events=CAPACITY > 0")
+        k = int(self._counters.to_numpy()[1])
+        if k > self._record_cap:
+            raise RuntimeError(f"{k} events happened but record_events={self._record_cap}: "
+                               "make the capacity larger")
+        t = self._log_t.to_numpy()[:k]
+        i = self._log_i.to_numpy()[:k].astype(np.float64)
+        j = self._log_j.to_numpy()[:k].astype(np.float64)
+        order = np.lexsort((j, i, t))
+        return np.stack([t[order], i[order], j[order]], axis=1)
+
+    def render(self, width: int = 1280, height: int = 720, color: str = "random") -> np.ndarray:
+        from .canvas import render
+        s = self.state()
+        return render(s.pos, s.vel, s.radius, s.color, self.box, width, height, color)
+
+    # ------------------------------------------------------------ save / load
+    def save(self, path):
+        np.savez(path, pos=self.pos.to_numpy(), vel=self.vel.to_numpy(), radius=self._radius, mass=self._mass,
+                 color=self._color, box=np.array(self.box), boundary=self.boundary, scheme=self.scheme,
+                 precision=self.precision, dt=self.dt, time=self.time, steps=self.steps,
+                 pair_count=self.pair_count.to_numpy(), wall_count=self.wall_count.to_numpy(),
+                 virial=self.virial.to_numpy(), wall_impulse=self.wall_impulse.to_numpy())
+
+    @classmethod
+    def load(cls, path) -> "Simulation":
+        ensure_init()
+        with np.load(path) as f:
+            d = {k: f[k] for k in f.files}
+        sim = cls.__new__(cls)
+        sim.scene = None
+        sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
+                   str(d["scheme"]), str(d["precision"]), float(d["dt"]), 0)
+        sim.pos.from_numpy(d["pos"])
+        sim.vel.from_numpy(d["vel"])
+        sim.pair_count.from_numpy(d["pair_count"])
+        sim.wall_count.from_numpy(d["wall_count"])
+        sim.virial.from_numpy(d["virial"])
+        sim.wall_impulse.from_numpy(d["wall_impulse"])
+        sim.time = float(d["time"])
+        sim.steps = int(d["steps"])
+        return sim
+
+    def __repr__(self):
+        return (f"Simulation(n={self.n}, box={self.box}, boundary={self.boundary!r}, scheme={self.scheme!r}, "
+                f"precision={self.precision!r}, dt={self.dt:.4g}, time={self.time:.4g})")
