@@ -7,13 +7,13 @@ tau). A round has three stages:
    (tau, t_end], a pair time of impact (both circles brought to a common time) or a wall hit,
    chosen by the key (time, lo, hi) so that ties break by ids.
 2. bound: a lower bound D_k on the time at which circle k's straight path can be disturbed
-   by anything other than its own predicted event. A neighbour l can only touch k after l
-   itself is disturbed (at min(t_l, D_l)) and after the gap between them has closed at the
-   largest closing speed 2 vlim:
-       D_k = min over l in the 3x3 cells of k of max(min(t_l, D_l), c_kl),
-       c_kl = (gap_kl + vlim (tau_k + tau_l)) / (2 vlim), gap measured at each own tau.
-   Iterated from the valid lower bound D = (earliest event of all), every iterate is a valid
-   lower bound, so two iterations suffice for correctness; more only add parallelism.
+   by anything other than its own predicted event. A neighbour l can only touch k
+   unexpectedly after l itself leaves its straight path (at min(t_l, D_l)), and then only
+   once its deviation, growing at most at 2 vlim, has closed their straight-path gap:
+       D_k = min over l in the 3x3 cells of k of F_kl(min(t_l, D_l))   (see bound_sweep).
+   Delays add up along a chain of neighbours, so far events do not hold up near ones. The
+   sweeps run from D = infinity down to the fixed point, which is unique, so D does not
+   depend on the order in which threads update it.
 3. execute: an event (i, j, t) is safe when i and j chose each other and t <= D_i, D_j.
    Safe events touch disjoint circles (no races, no atomics on velocities); the earliest
    event overall is always safe, so every round makes progress. Simultaneous safe events
@@ -106,38 +106,56 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p
 
 
 @ti.kernel
-def bound(pos: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d_in: ndarr, d_out: ndarr,
-          cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
-          box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, scalars: ndarr,
-          first: ti.template(), only_with_events: ti.template(), real: ti.template(), periodic: ti.template()):
+def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr,
+                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32,
+                sy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+                real: ti.template(), periodic: ti.template(), from_below: ti.template()) -> ti.i32:
+    """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)); returns how many D decreased.
+
+    F_kl(s) is the earliest time at which k, on its straight path, can meet l when l leaves
+    its straight path at s: with T = max(s, tau_k, tau_l), g the straight-path gap at T and
+    dv their relative velocity, contact needs g - |dv| (t - T) <= 2 vlim (t - s), so
+    F = (g + |dv| T + 2 vlim s) / (|dv| + 2 vlim) >= s. F is monotone in s, so the sweeps
+    decrease D towards the unique fixed point whatever the order of updates.
+    """
     n = pos.shape[0]
     box = ti.Vector([box_w, box_h], dt=real)
     horizon = ti.cast(t_end, real)
-    inv_two_v = ti.cast(0.5 / vlim, real)
-    v = ti.cast(vlim, real)
+    two_v = ti.cast(2.0 * vlim, real)
+    changed = 0
     for k in range(n):
-        use = True
-        if ti.static(only_with_events):
-            use = ev_t[k] <= horizon
-        if use:
-            xk = pos[k]
-            rk = radius[k]
-            tk = tau[k]
-            dk = ti.cast(NEVER, real)
-            c = cell_of[k]
-            for a, b in ti.ndrange(sx, sy):
-                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-                if c2 >= 0:
-                    for m in range(cell_start[c2], cell_start[c2 + 1]):
-                        l = sorted_ids[m]
-                        if l != k:
-                            gap = displacement(xk, pos[l], box, periodic).norm() - rk - radius[l]
-                            reach = ti.max(ti.max(tk, tau[l]), (gap + v * (tk + tau[l])) * inv_two_v)
-                            dl = scalars[0]
-                            if ti.static(not first):
-                                dl = d_in[l]
-                            dk = ti.min(dk, ti.max(ti.min(ev_t[l], dl), reach))
-            d_out[k] = dk
+        xk = pos[k]
+        vk = vel[k]
+        rk = radius[k]
+        tk = tau[k]
+        dk = d[k]
+        if ti.static(from_below):
+            dk = horizon
+        c = cell_of[k]
+        for a, b in ti.ndrange(sx, sy):
+            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+            if c2 >= 0:
+                for m in range(cell_start[c2], cell_start[c2 + 1]):
+                    l = sorted_ids[m]
+                    s = ti.min(ev_t[l], d[l])
+                    if l != k and s < dk:
+                        t0 = ti.max(s, ti.max(tk, tau[l]))
+                        gap = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box,
+                                           periodic).norm() - rk - radius[l]
+                        dv = (vel[l] - vk).norm()
+                        # F >= s exactly; the max keeps round-off from putting it below.
+                        arrival = ti.max(s, (ti.max(gap, 0.0) + dv * t0 + two_v * s) / (dv + two_v))
+                        if arrival < dk:
+                            dk = arrival
+        if ti.static(from_below):
+            if dk > d[k]:
+                d[k] = dk
+                changed += 1
+        else:
+            if dk < d[k]:
+                d[k] = dk
+                changed += 1
+    return changed
 
 
 @ti.func

@@ -140,9 +140,9 @@ def _lattice_shape(n, usable_w, usable_h, periodic):
         nx = -(-n // ny)
         if periodic:
             ax, ay = usable_w / nx, usable_h / ny
-            d = min(ax, math.hypot(ax / 2, ay) if ny > 1 else math.inf, ay if ny % 2 else math.inf)
-            if ny == 1:
-                d = min(ax, usable_h)
+            # Neighbours: along a row (ax), the next row (shifted by ax / 2), two rows on (same
+            # shift, 2 ay); with an odd row count the last and first rows share a shift (ay).
+            d = min(ax, math.hypot(ax / 2, ay), 2 * ay, ay if ny % 2 else math.inf)
         else:
             if ny == 1:
                 ax = usable_w / (nx - 1) if nx > 1 else math.inf
@@ -151,7 +151,7 @@ def _lattice_shape(n, usable_w, usable_h, periodic):
             else:
                 ax = usable_w / (nx - 0.5) if nx > 1 else math.inf
                 ay = usable_h / (ny - 1)
-                d = min(ax, math.hypot(ax / 2, ay))
+                d = min(ax, math.hypot(ax / 2, ay), 2 * ay if ny > 2 else math.inf)
         if best is None or d > best[4]:
             best = (nx, ny, ax, ay, d)
     return best

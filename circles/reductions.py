@@ -62,6 +62,10 @@ def fill_i32(dst: ndarr, value: ti.i32):
 
 
 @ti.kernel
-def fill_real(dst: ndarr, value: ti.f64):
+def _fill_real(dst: ndarr, value: ti.f64, real: ti.template()):
     for i in range(dst.shape[0]):
-        dst[i] = value
+        dst[i] = ti.cast(value, real)
+
+
+def fill_real(dst, value):
+    _fill_real(dst, value, dst.dtype)

@@ -17,19 +17,21 @@ from . import discrete, event, placement, reductions
 from .backend import ensure_init
 from .geometry import NEVER
 from .grid import Grid
-from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
+from .scene import (DENSEST_PACKING, BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
 
 #: Speeds may grow by this factor within an event step before the step is cut short.
 SPEED_MARGIN = 1.25
 #: Default event-scheme step: the fastest circle moves this many largest radii per step.
-EVENT_STEP_RADII = 1.0
+EVENT_STEP_RADII = 0.3
 #: Default discrete-scheme step: the fastest circle moves this fraction of the smallest radius.
 DISCRETE_STEP_FRACTION = 0.2
 #: Rounds of pair resolution per discrete step; what is left stays for the next step.
 DISCRETE_MAX_ROUNDS = 16
 #: A lattice start is melted until circles have had this many collisions each on average.
-MELT_COLLISIONS_PER_CIRCLE = 20
+MELT_COLLISIONS_PER_CIRCLE = 10
+#: Sweeps of the causal bound per round before giving up (it settles in a few).
+MAX_BOUND_SWEEPS = 10_000
 #: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
 INPUT_OVERLAP_TOLERANCE = 1e-9
 
@@ -174,6 +176,7 @@ class Simulation:
         self.time = 0.0
         self.steps = 0
         self.rounds = 0
+        self.sweeps = 0
         self.redone_steps = 0
         self._mass = np.asarray(mass, dtype=np.float64).copy()
         self._radius = np.asarray(radius, dtype=np.float64).copy()
@@ -227,7 +230,6 @@ class Simulation:
         self._ev_p = ti.ndarray(ti.i32, shape=n)
         self._dirty = ti.ndarray(ti.i32, shape=n)
         self._d1 = ti.ndarray(real, shape=n)
-        self._d2 = ti.ndarray(real, shape=n)
         self._backup = {name: self._like(getattr(self, name))
                         for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
         self._event_arrays = True
@@ -247,8 +249,12 @@ class Simulation:
             angle = rng.uniform(0.0, 2.0 * np.pi, self.n)
             self.vel.from_numpy(np.stack([np.cos(angle), np.sin(angle)], axis=1).astype(self._np_real))
         vmax = float(np.sqrt((self.vel.to_numpy().astype(np.float64) ** 2).sum(axis=1)).max())
-        # Gaps in a dense lattice are a small fraction of a radius: step a few gaps at a time.
-        h = 0.25 * self._rmax / vmax
+        # Gaps in a dense lattice are a small fraction of a radius: step one mean gap at a time,
+        # so each circle has about one collision per step and the causal chains stay short.
+        fraction = float(np.sum(np.pi * self._radius ** 2)) / (self.box[0] * self.box[1])
+        mean_r = float(self._radius.mean())
+        gap = 2.0 * mean_r * (math.sqrt(DENSEST_PACKING / fraction) - 1.0)
+        h = max(gap, 1e-3 * mean_r) / vmax
         target = MELT_COLLISIONS_PER_CIRCLE * self.n
         for _ in range(100_000):
             if self._pair_collisions() >= target:
@@ -337,12 +343,17 @@ class Simulation:
                                  *g, w, hgt, t_end, self._scalars, real, periodic)
             if tmin > t_end:
                 break
-            event.bound(self.pos, self.radius, self.tau, self._ev_t, self._d2, self._d1, *g, w, hgt, t_end, vlim,
-                        self._scalars, True, False, real, periodic)
-            event.bound(self.pos, self.radius, self.tau, self._ev_t, self._d1, self._d2, *g, w, hgt, t_end, vlim,
-                        self._scalars, False, True, real, periodic)
+            # Only bounds below t_end matter (events lie in [0, t_end]): start the sweeps there.
+            reductions.fill_real(self._d1, t_end)
+            for sweep in range(MAX_BOUND_SWEEPS + 1):
+                if event.bound_sweep(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *g, w, hgt,
+                                     t_end, vlim, real, periodic, False) == 0:
+                    break
+            else:
+                raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
+            self.sweeps += sweep + 1
             executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self._ev_t, self._ev_p,
-                                     self._d2, self._dirty, self.pair_count, self.wall_count, self.virial,
+                                     self._d1, self._dirty, self.pair_count, self.wall_count, self.virial,
                                      self.wall_impulse, *g, w, hgt, t_end, vlim, self.time, self._scalars,
                                      self._counters, self._log_t, self._log_i, self._log_j, real, periodic, record)
             self.rounds += 1

@@ -1,0 +1,340 @@
+"""Command line: ``circles run [SCENE.toml] [flags]`` simulates a scene and writes its frames.
+
+A scene comes from a TOML file (the Scene fields at top level, and a ``[run]`` table with
+``duration``, ``fps``, ``size``, ``color``, ``out`` and ``arch``), from flags, or from both:
+flags override the file. Without a file the scene is the showcase below, which flags
+change in the same way; ``circles`` with no arguments at all runs the showcase.
+
+Frames are taken every 1/fps of simulated time, starting with the state at t = 0, so a run
+of ``duration`` seconds gives ``ceil(duration * fps)`` frames showing t = 0, 1/fps, ...,
+and the video lasts ``duration`` seconds and shows the same motion on every machine. The
+simulation runs the whole ``duration``; the state at the end is summarised, not drawn.
+
+Exit status: 0 done; 2 bad input (one line on stderr, before any simulating); 1 the run
+failed; 130 stopped by Ctrl-C, with the frames made so far written and playable.
+"""
+
+import argparse
+import math
+import re
+import signal
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+DEFAULT_OUT = "outputs/circles.mp4"
+# The showcase run, made when no scene file is given: two thousand circles of a range of
+# sizes (area fraction 0.14), mass by radius, in a 16:9 box with walls, exact collisions;
+# 5 s at 30 frames per second, about 25 000 collisions: under a minute on a 2-core CPU.
+SHOWCASE_SCENE = {
+    "n": 2000,
+    "box": [16.0, 9.0],
+    "radius": [0.03, 0.08],
+    "speed": [0.5, 1.5],
+    "mass": "radius",
+    "seed": 1,
+}
+RUN_DEFAULTS = {
+    "duration": 5.0,
+    "fps": 30.0,
+    "size": "1280x720",
+    "color": "random",
+    "out": DEFAULT_OUT,
+    "arch": "auto",
+}
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+class UsageError(Exception):
+    """Bad input: the message is printed as one line and the exit status is 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UsageError(message)
+
+
+def _build_parser():
+    parser = _Parser(prog="circles", description="Simulate many elastic circles in a box "
+                     "and write the run as a video, a GIF or PNG frames.")
+    commands = parser.add_subparsers(dest="command", metavar="run")
+    run = commands.add_parser(
+        "run", help="simulate a scene and write its frames",
+        description="Simulate a scene (the showcase, or SCENE.toml) and write its frames. "
+                    "Flags override the scene file.")
+    run.add_argument("scene", nargs="?", metavar="SCENE.toml",
+                     help="scene file: Scene fields at top level, a [run] table for the "
+                          "run options")
+    scene = run.add_argument_group("scene")
+    scene.add_argument("--n", type=int, help="number of circles")
+    scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
+    scene.add_argument("--radius", type=float, nargs="+", metavar="R",
+                       help="radius R, or a range RMIN RMAX")
+    scene.add_argument("--speed", type=float, nargs="+", metavar="V",
+                       help="speed range VMIN VMAX (or one speed V)")
+    scene.add_argument("--mass", choices=("radius", "area", "equal"),
+                       help="mass proportional to the radius, to the area, or equal")
+    scene.add_argument("--boundary", choices=("walls", "periodic"))
+    scene.add_argument("--scheme", choices=("event", "discrete"),
+                       help="event: exact collisions; discrete: fast, approximate")
+    scene.add_argument("--precision", choices=("f32", "f64"))
+    scene.add_argument("--dt", type=float, help="step length in simulated seconds")
+    scene.add_argument("--seed", type=int)
+    output = run.add_argument_group("run")
+    output.add_argument("--duration", type=float, metavar="T",
+                        help=f"simulated seconds (default {RUN_DEFAULTS['duration']:g})")
+    output.add_argument("--fps", type=float, metavar="F",
+                        help=f"frames per simulated second (default {RUN_DEFAULTS['fps']:g})")
+    output.add_argument("--size", metavar="WxH",
+                        help=f"image size in pixels (default {RUN_DEFAULTS['size']})")
+    output.add_argument("--color", choices=("random", "speed"),
+                        help="each circle's own colour, or a colormap of its speed")
+    output.add_argument("--arch", choices=("auto", "cpu", "gpu"), help="where to run")
+    output.add_argument("--out", metavar="PATH",
+                        help=f"*.mp4, *.gif, or a folder for PNG frames (default "
+                             f"{DEFAULT_OUT})")
+    return parser
+
+
+def _scene_overrides(args):
+    overrides = {}
+    for key in ("n", "mass", "boundary", "scheme", "precision", "dt", "seed"):
+        value = getattr(args, key)
+        if value is not None:
+            overrides[key] = value
+    if args.box is not None:
+        overrides["box"] = list(args.box)
+    for key in ("radius", "speed"):
+        values = getattr(args, key)
+        if values is not None:
+            if len(values) > 2:
+                raise UsageError(f"argument --{key}: give one value or a range MIN MAX, "
+                                 f"not {len(values)} values")
+            overrides[key] = values[0] if len(values) == 1 else list(values)
+    return overrides
+
+
+def _read_scene_file(path):
+    try:
+        with open(path, "rb") as file:
+            data = tomllib.load(file)
+    except FileNotFoundError:
+        raise UsageError(f"scene file {path} not found") from None
+    except OSError as error:
+        raise UsageError(f"cannot read scene file {path}: {error.strerror}") from None
+    except tomllib.TOMLDecodeError as error:
+        raise UsageError(f"{path}: not valid TOML ({error})") from None
+    run = data.pop("run", {})
+    if not isinstance(run, dict):
+        raise UsageError(f"{path}: run must be a table [run], not {run!r}")
+    unknown = sorted(set(run) - set(RUN_DEFAULTS))
+    if unknown:
+        raise UsageError(f"{path}: unknown [run] key(s) {', '.join(unknown)}: known keys "
+                         f"are {', '.join(RUN_DEFAULTS)}")
+    return data, run
+
+
+def _parse_size(size):
+    if isinstance(size, list) and len(size) == 2:
+        width, height = size
+    else:
+        match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(size))
+        if not match:
+            raise UsageError(f"size {size!r} is not WxH, e.g. 1280x720")
+        width, height = int(match[1]), int(match[2])
+    from .canvas import MAX_IMAGE_SIDE
+    for value in (width, height):
+        if isinstance(value, bool) or not isinstance(value, int) \
+                or not 2 <= value <= MAX_IMAGE_SIDE:
+            raise UsageError(f"size {size!r}: width and height must be whole numbers of "
+                             f"pixels from 2 to {MAX_IMAGE_SIDE}")
+    return width, height
+
+
+def _positive(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value) or value <= 0:
+        raise UsageError(f"{name} {value!r} must be a positive number")
+    return float(value)
+
+
+def _run_options(file_run, args):
+    options = {**RUN_DEFAULTS, **file_run}
+    for key in RUN_DEFAULTS:
+        value = getattr(args, key)
+        if value is not None:
+            options[key] = value
+    from .backend import ARCHES
+    from .canvas import COLOR_MODES
+    options["duration"] = _positive("duration", options["duration"])
+    options["fps"] = _positive("fps", options["fps"])
+    options["size"] = _parse_size(options["size"])
+    for key, allowed in (("color", COLOR_MODES), ("arch", ARCHES)):
+        if options[key] not in allowed:
+            raise UsageError(f"{key} {options[key]!r} is unknown: use one of "
+                             f"{', '.join(allowed)}")
+    if not isinstance(options["out"], str) or not options["out"]:
+        raise UsageError(f"out {options['out']!r} must be a path")
+    return options
+
+
+def frame_times(duration, fps):
+    """Simulated times of the frames: k / fps for every k with k / fps < duration."""
+    count = max(math.ceil(duration * fps - 1e-9), 1)
+    return [k / fps for k in range(count)]
+
+
+def _prepare(argv):
+    """Everything that can fail on bad input, before any simulating: (scene, options)."""
+    parser = _build_parser()
+    if not argv:
+        argv = ["run"]
+    args = parser.parse_args(argv)
+    if args.command is None:
+        raise UsageError("give a command: circles run [SCENE.toml] [flags] "
+                         "(see circles run --help)")
+    from .scene import Scene
+    from .video import check_writable
+
+    fields, file_run = (_read_scene_file(args.scene) if args.scene
+                        else (dict(SHOWCASE_SCENE), {}))
+    try:
+        scene = Scene.from_dict({**fields, **_scene_overrides(args)})
+    except (ValueError, TypeError) as error:
+        where = f"{args.scene}: " if args.scene else ""
+        raise UsageError(f"{where}{error}") from None
+    options = _run_options(file_run, args)
+    try:
+        options["out"] = check_writable(options["out"], options["fps"])
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    return scene, options
+
+
+class _StopRequest:
+    """The first Ctrl-C asks to stop after the current frame; a second stops at once."""
+
+    def __init__(self):
+        self.requested = False
+
+    def __call__(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        sys.stderr.write("\nstopping after this frame (Ctrl-C again to stop at once)\n")
+
+
+def _run(scene, options):
+    from tqdm import tqdm
+
+    import circles
+    from . import canvas
+    from .video import FrameWriter
+
+    started = time.perf_counter()
+    try:
+        arch = circles.init(options["arch"])
+        # Placement can still refuse a scene that passed the checks of Scene.
+        sim = circles.Simulation(scene)
+    except (ValueError, RuntimeError) as error:
+        raise UsageError(str(error)) from None
+    setup_s = time.perf_counter() - started
+    start_stats = sim.stats()
+    width, height = options["size"]
+    times = frame_times(options["duration"], options["fps"])
+    periodic = scene.boundary == "periodic"
+    speed_scale = None
+    clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
+    writer = FrameWriter(options["out"], options["fps"])
+    bar = tqdm(total=len(times), unit="frame", file=sys.stderr, disable=None,
+               dynamic_ncols=True, desc="circles")
+    stop = _StopRequest()
+    interrupted = False
+    previous_handler = signal.getsignal(signal.SIGINT)
+    try:
+        signal.signal(signal.SIGINT, stop)
+        for k in range(len(times)):
+            tick = time.perf_counter()
+            state = sim.state()
+            if speed_scale is None:
+                # Fixed for the whole run, so that a colour means one speed in every frame.
+                speed_scale = canvas.speed_scale_of(state.vel)
+            frame = canvas.render(state.pos, state.vel, state.radius, state.color, sim.box,
+                                  width, height, options["color"], speed_scale=speed_scale,
+                                  periodic=periodic)
+            clock["render"] += time.perf_counter() - tick
+            tick = time.perf_counter()
+            writer.write(frame)
+            clock["write"] += time.perf_counter() - tick
+            if stop.requested:
+                break
+            tick = time.perf_counter()
+            end = times[k + 1] if k + 1 < len(times) else options["duration"]
+            sim.advance(end - sim.time)
+            clock["simulate"] += time.perf_counter() - tick
+            bar.update(1)
+            rate = scene.n * sim.steps / max(clock["simulate"], 1e-9)
+            bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
+                                f"{rate:.3g} circle-steps/s", refresh=False)
+            if stop.requested:
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        signal.signal(signal.SIGINT, previous_handler)
+        bar.close()
+        writer.close()
+    interrupted = interrupted or stop.requested
+    wall_s = time.perf_counter() - started
+    _summary(sim, scene, arch, start_stats, writer, clock, setup_s, wall_s, interrupted)
+    return EXIT_INTERRUPTED if interrupted else 0
+
+
+def _summary(sim, scene, arch, start_stats, writer, clock, setup_s, wall_s, interrupted):
+    stats = sim.stats()
+    energy_0 = start_stats["kinetic_energy"]
+    energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
+    rate = scene.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
+    lines = [
+        ("circles", f"{scene.n} ({scene.scheme}, {scene.precision}, {scene.boundary}, "
+                    f"{arch})"),
+        ("simulated", f"{sim.time:.6g} s in {sim.steps} steps of dt <= {sim.dt:.3g} s"
+                      + (" (stopped by Ctrl-C)" if interrupted else "")),
+        ("wall time", f"{wall_s:.1f} s: placement {setup_s:.1f}, simulation "
+                      f"{clock['simulate']:.1f}, drawing {clock['render']:.1f}, "
+                      f"writing {clock['write']:.1f}"),
+        ("throughput", f"{rate:.3g} circle-steps/s (simulation only)"),
+        ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
+        ("energy", f"relative change {energy_change:.2e}"),
+        ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
+        ("wrote", f"{writer.path} ({writer.frames} frames at {writer.fps:g} fps)"),
+    ]
+    for name, text in lines:
+        print(f"{name:<11} {text}")
+
+
+def main(argv=None):
+    """Entry point of the ``circles`` command; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        scene, options = _prepare(argv)
+        return _run(scene, options)
+    except UsageError as error:
+        print(f"circles: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SystemExit as exit_:  # --help
+        return exit_.code if isinstance(exit_.code, int) else 0
+    except KeyboardInterrupt:  # before the first frame: nothing written yet
+        print("circles: stopped by Ctrl-C", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (FloatingPointError, RuntimeError, OSError) as error:
+        # A broken state, an encoder that quit, a full disk: the frames so far are kept.
+        print(f"circles: the run failed: {error}", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
