@@ -24,7 +24,8 @@ def init(arch: str = "auto", **options) -> str:
     if arch == "cpu":
         ti.init(arch=ti.cpu, **options)
     else:
-        ti.init(arch=ti.gpu, **options)
+        # Named GPU backends, not ti.gpu: its OpenGL probe can crash a machine without a display.
+        ti.init(arch=[ti.cuda, ti.vulkan, ti.metal], **options)
     used = ti.lang.impl.current_cfg().arch
     name = "cpu" if used in (ti.x64, ti.arm64) else "gpu"
     if arch == "gpu" and name == "cpu":

@@ -347,6 +347,13 @@ def _draw_tiles(
             # margin and anti-alias the box edges by the fraction of each pixel inside.
             interior = (x0 >= box_px[0] and x1 <= box_px[1] and y0 >= box_px[2]
                         and y1 <= box_px[3])
+            if interior and tile_start[t] == tile_start[t + 1]:
+                # No circle here: the plain background, and the scratch is still zero.
+                for y in range(y0, y1):
+                    for x in range(x0, x1):
+                        for c in ti.static(range(3)):
+                            image[y, x, c] = ti.cast(inside[c], ti.u8)
+                continue
             for y in range(y0, y1):
                 inside_y = ti.max(ti.min(y + 1.0, box_px[3]) - ti.max(y + 0.0, box_px[2]),
                                   0.0)

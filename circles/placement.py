@@ -8,7 +8,10 @@ hash of (seed, circle, attempt), not from a per-thread generator, for the same r
 
 Above it (RSA jams near 0.547 for equal disks): a hexagonal lattice whose spacing is the
 largest that fits, with every site jittered by at most half the free gap and the circles
-assigned to sites in a random order. The caller then melts it with the event scheme.
+assigned to sites in a random order. The caller then melts it with the event scheme. When
+the radii are too spread for a lattice of the largest one, the lattice takes the circles
+shrunk by a common factor, and they grow back while the lattice melts (`grow`): each circle
+grows by at most half its smallest gap, so no pair ever overlaps.
 """
 
 import math
@@ -197,3 +200,62 @@ def hexagonal(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator)
         pos[:, 0] = np.clip(pos[:, 0], radius, w - radius)
         pos[:, 1] = np.clip(pos[:, 1], radius, h - radius)
     return pos
+
+
+def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator):
+    """(positions, scale): a lattice start for the radii times `scale` <= 1, the largest that fits."""
+    scale = 1.0
+    for _ in range(200):
+        try:
+            return hexagonal(radius * scale, box, periodic, rng), scale
+        except ValueError:
+            if scale < 0.3:
+                raise
+            scale *= 0.98
+    raise AssertionError("unreachable")
+
+
+@ti.kernel
+def _grow_limits(pos: ndarr, radius: ndarr, target: ndarr, new_radius: ndarr, cell_of: ndarr, cell_start: ndarr,
+                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64,
+                 real: ti.template(), periodic: ti.template()) -> ti.i32:
+    box = ti.Vector([box_w, box_h], dt=ti.f64)
+    short = 0
+    for i in range(pos.shape[0]):
+        xi = ti.cast(pos[i], ti.f64)
+        ri = ti.cast(radius[i], ti.f64)
+        allowed = ti.cast(target[i], ti.f64)
+        if ti.static(not periodic):
+            allowed = ti.min(allowed, ti.min(ti.min(xi[0], box_w - xi[0]), ti.min(xi[1], box_h - xi[1])))
+        c = cell_of[i]
+        for a, b in ti.ndrange(sx, sy):
+            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+            if c2 >= 0:
+                for m in range(cell_start[c2], cell_start[c2 + 1]):
+                    j = sorted_ids[m]
+                    if j != i:
+                        d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
+                        gap = d - ri - ti.cast(radius[j], ti.f64)
+                        # Half the gap each, less a clearance so round-off never closes it.
+                        allowed = ti.min(allowed, ri + 0.5 * gap * (1.0 - 1e-6))
+        grown = ti.max(ri, allowed)
+        new_radius[i] = ti.cast(grown, real)
+        if grown < target[i]:
+            short += 1
+    return short
+
+
+def grow(pos, radius, target, scratch, grid, box, real, periodic):
+    """Grow every circle towards its target radius without overlap; returns how many are still short.
+
+    `grid` must be built with a reach of at least the largest target diameter.
+    """
+    short = _grow_limits(pos, radius, target, scratch, *grid.args(), box[0], box[1], real, periodic)
+    _copy(scratch, radius)
+    return short
+
+
+@ti.kernel
+def _copy(src: ndarr, dst: ndarr):
+    for i in range(src.shape[0]):
+        dst[i] = src[i]

@@ -107,13 +107,14 @@ class Simulation:
         if fraction <= placement.RSA_LIMIT:
             pos = placement.random_sequential(radius, scene.box, periodic, scene.seed)
         melt = pos is None
+        scale = 1.0
         if melt:
-            pos = placement.hexagonal(radius, scene.box, periodic, rng)
+            pos, scale = placement.hexagonal_shrunk(radius, scene.box, periodic, rng)
         self.scene = scene
         self._setup(pos, vel, radius, mass, color, scene.box, scene.boundary, scene.scheme, scene.precision,
                     scene.dt, record_events, need_event=melt)
         if melt:
-            self._melt(rng)
+            self._melt(rng, scale)
 
     @classmethod
     def from_arrays(cls, pos, vel, radius, mass=None, box=(1.0, 1.0), boundary="walls", scheme="event",
@@ -241,8 +242,16 @@ class Simulation:
             return ti.Vector.ndarray(arr.n, arr.dtype, shape=arr.shape)
         return ti.ndarray(arr.dtype, shape=arr.shape)
 
-    def _melt(self, rng):
-        """Run the event scheme from the lattice until it is forgotten, then restore the start velocities."""
+    def _melt(self, rng, scale=1.0):
+        """Run the event scheme from the lattice until it is forgotten, then restore the start velocities.
+
+        With scale < 1 the circles start shrunk by `scale` and grow back to their radii on the way.
+        """
+        target = None
+        if scale < 1.0:
+            target = ti.ndarray(ti.f64, shape=self.n)
+            target.from_numpy(self._radius)
+            self.radius.from_numpy((self._radius * scale).astype(self._np_real))
         start_vel = self.vel.to_numpy()
         speeds = np.sqrt((start_vel.astype(np.float64) ** 2).sum(axis=1))
         if speeds.max() <= 0:
@@ -255,11 +264,21 @@ class Simulation:
         mean_r = float(self._radius.mean())
         gap = 2.0 * mean_r * (math.sqrt(DENSEST_PACKING / fraction) - 1.0)
         h = max(gap, 1e-3 * mean_r) / vmax
-        target = MELT_COLLISIONS_PER_CIRCLE * self.n
+        wanted = MELT_COLLISIONS_PER_CIRCLE * self.n
+        short = self.n if scale < 1.0 else 0
         for _ in range(100_000):
-            if self._pair_collisions() >= target:
+            if short == 0 and self._pair_collisions() >= wanted:
                 break
             self._event_step(h)
+            if short:
+                self.grid.build(self.pos, 2.0 * self._rmax)
+                short = placement.grow(self.pos, self.radius, target, self._d1, self.grid, self.box, self._real,
+                                       self.periodic)
+        if short:
+            raise ValueError(f"could not grow {short} of {self.n} circles to their radii in a {self.box[0]} x "
+                             f"{self.box[1]} box: the area fraction is too close to jamming for these radii; "
+                             "use fewer or smaller circles or a bigger box")
+        self.radius.from_numpy(self._radius.astype(self._np_real))
         self.vel.from_numpy(start_vel)
         for arr in (self.pair_count, self.wall_count):
             reductions.fill_i32(arr, 0)
@@ -446,7 +465,7 @@ class Simulation:
     def render(self, width: int = 1280, height: int = 720, color: str = "random") -> np.ndarray:
         from .canvas import render
         s = self.state()
-        return render(s.pos, s.vel, s.radius, s.color, self.box, width, height, color)
+        return render(s.pos, s.vel, s.radius, s.color, self.box, width, height, color, periodic=self.periodic)
 
     # ------------------------------------------------------------ save / load
     def save(self, path):

@@ -1,0 +1,143 @@
+"""The command line: a run end to end in a subprocess, and bad input refused at once.
+
+A run of duration T at F frames per second writes ceil(T * F) frames: t = 0 is the first,
+t = T is simulated but not drawn (see circles.cli).
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import pytest
+
+from circles import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1",
+         "--size", "80x60", "--arch", "cpu"]
+
+
+def run_cli(args, cwd, **options):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "circles.cli", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120, **options)
+
+
+def test_run_writes_a_gif_of_duration_times_fps_frames(tmp_path):
+    result = run_cli(["run", *SMALL, "--duration", "0.5", "--fps", "10",
+                      "--out", "out/run.gif"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    gif = iio.imread(tmp_path / "out" / "run.gif", index=None)
+    assert gif.shape[:3] == (5, 60, 80)
+    summary = result.stdout
+    for word in ("circles", "30", "steps", "circle-steps/s", "collisions", "energy",
+                 "overlap", "run.gif"):
+        assert word in summary
+    assert "simulated   0.5 s" in summary
+
+
+def test_scene_file_with_flags_overriding_it(tmp_path):
+    (tmp_path / "scene.toml").write_text(
+        'n = 20\nbox = [4.0, 3.0]\nradius = 0.1\nspeed = [0.5, 1.0]\nmass = "equal"\n'
+        'boundary = "periodic"\n\n'
+        '[run]\nduration = 0.4\nfps = 5\nsize = "64x48"\ncolor = "speed"\n'
+        'out = "frames"\narch = "cpu"\n')
+    result = run_cli(["run", "scene.toml", "--fps", "10"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    pngs = sorted((tmp_path / "frames").glob("frame_*.png"))
+    assert len(pngs) == 4  # 0.4 s at 10 (the flag), not 5 (the file), frames per second
+    assert iio.imread(pngs[0]).shape == (48, 64, 3)
+    assert "20 (event, f64, periodic" in result.stdout
+
+
+def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = tmp_path / "long.gif"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "circles.cli", "run", *SMALL, "--duration", "1000",
+         "--fps", "10", "--out", str(out)],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while not (out.exists() and out.stat().st_size > 2000):  # past a frame or two
+            assert process.poll() is None, process.communicate()
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        process.send_signal(signal.SIGINT)
+        stdout, stderr = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert "stopped by Ctrl-C" in stdout
+    frames = iio.imread(out, index=None)
+    assert frames.shape[0] >= 1 and frames.shape[1:3] == (60, 80)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["run", "--n", "-5"], ["n = -5"]),
+    (["run", "--n", "many"], ["--n", "many"]),
+    (["run", "--mass", "heavy"], ["--mass", "heavy", "radius"]),
+    (["run", "--radius", "1", "2", "3"], ["--radius", "3 values"]),
+    (["run", "--radius", "0.5", "0.1"], ["radius", "below"]),
+    (["run", "--n", "100000", "--radius", "0.5"], ["area fraction"]),
+    (["run", "--size", "1280"], ["size", "1280", "WxH"]),
+    (["run", "--size", "0x720"], ["size", "0x720"]),
+    (["run", "--fps", "0"], ["fps", "0"]),
+    (["run", "--duration", "-1"], ["duration", "-1"]),
+    (["run", "--bogus"], ["--bogus"]),
+    (["fly"], ["fly"]),
+    (["run", "missing.toml"], ["missing.toml", "not found"]),
+    (["run", "--out", "run.gif", "--fps", "60"], ["GIF", "50"]),
+])
+def test_bad_input_exits_2_with_one_line(args, words, capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(args) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("circles: error:"), captured.err
+    for word in words:
+        assert word in lines[0]
+
+
+def test_bad_scene_file_values_exit_2(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    Path("bad.toml").write_text('n = 10\nscheme = "magic"\n')
+    Path("broken.toml").write_text('n = = 3\n')
+    Path("run_key.toml").write_text('n = 10\n[run]\nspeed = 3\n')
+    for name, word in (("bad.toml", "magic"), ("broken.toml", "TOML"),
+                       ("run_key.toml", "unknown [run] key")):
+        assert cli.main(["run", name]) == 2
+        error = capsys.readouterr().err.strip()
+        assert len(error.splitlines()) == 1 and name in error and word in error
+
+
+def test_unwritable_output_is_refused_before_simulating(tmp_path, capsys, monkeypatch):
+    import circles
+
+    def no_simulation(*args, **kwargs):
+        raise AssertionError("the simulation started")
+
+    monkeypatch.setattr(circles, "init", no_simulation)
+    monkeypatch.setattr(circles, "Simulation", no_simulation)
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    assert cli.main(["run", "--out", str(blocker / "run.mp4")]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "cannot write" in error and "run.mp4" in error
+
+
+def test_help_exits_0(capsys):
+    assert cli.main(["run", "--help"]) == 0
+    assert "--radius" in capsys.readouterr().out
+
+
+def test_frame_times_start_at_zero_and_stop_before_the_end():
+    assert cli.frame_times(0.5, 10) == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
+    assert len(cli.frame_times(5.0, 30)) == 150
+    assert len(cli.frame_times(1.05, 30)) == 32  # a last, partial interval gets a frame

@@ -1,0 +1,193 @@
+"""Single collisions with known outcomes, through ``Simulation.from_arrays``.
+
+The exact outcomes follow from momentum and energy conservation along the
+contact normal. Where the normal is exactly (1, 0) (head-on along x) the
+arithmetic of the impulse is exact but for a few roundings, so velocities are
+held to 1e-14 of the speed; where the normal is computed from a root (glancing
+hits, time of impact) a few more roundings enter, still far below 1e-12.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from reference import Reference
+
+BOX = (1.0, 1.0)
+R = 0.05
+
+
+def two(circles, pos, vel, mass, scheme="event", dt=None, box=BOX, radius=(R, R), **kw):
+    return circles.Simulation.from_arrays(
+        np.array(pos, float), np.array(vel, float), np.array(radius, float),
+        mass=np.array(mass, float), box=box, boundary="walls", scheme=scheme,
+        precision="f64", dt=dt, **kw)
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+def test_head_on_equal_masses_swap_velocities(circles_cpu, scheme):
+    """Both schemes resolve a head-on hit with the same impulse: an exact swap.
+    The event scheme also places the hit at t = gap / closing speed = 0.15, so
+    after 0.2 the circles are back at 0.40 and 0.60."""
+    sim = two(circles_cpu, [[0.3, 0.5], [0.7, 0.5]], [[1.0, 0.0], [-1.0, 0.0]], [1.0, 1.0],
+              scheme=scheme, dt=0.01)
+    sim.advance(0.2)
+    s = sim.state()
+    assert s.vel == pytest.approx(np.array([[-1.0, 0.0], [1.0, 0.0]]), abs=1e-14)
+    st = sim.stats()
+    assert st["pair_collisions"] == 1 and st["wall_collisions"] == 0
+    assert st["kinetic_energy"] == pytest.approx(1.0, rel=1e-14)
+    if scheme == "event":
+        assert s.pos == pytest.approx(np.array([[0.4, 0.5], [0.6, 0.5]]), abs=1e-14)
+        # |J| = 2 |vn| / (w_i + w_j) = 2, virial = (r_i + r_j) |J|
+        assert st["virial"] == pytest.approx(2 * R * 2.0, rel=1e-14)
+        assert st["max_overlap"] == 0.0
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+def test_unequal_masses_follow_1d_formula(circles_cpu, scheme):
+    """v1' = ((m1 - m2) v1 + 2 m2 v2) / (m1 + m2), v2' likewise, and momentum
+    and energy unchanged to round-off."""
+    m1, m2, v1, v2 = 1.0, 3.0, 1.0, -0.5
+    sim = two(circles_cpu, [[0.3, 0.5], [0.7, 0.5]], [[v1, 0.0], [v2, 0.0]], [m1, m2],
+              scheme=scheme, dt=0.01)
+    sim.advance(0.25)
+    s = sim.state()
+    e1 = ((m1 - m2) * v1 + 2 * m2 * v2) / (m1 + m2)
+    e2 = ((m2 - m1) * v2 + 2 * m1 * v1) / (m1 + m2)
+    assert s.vel == pytest.approx(np.array([[e1, 0.0], [e2, 0.0]]), abs=1e-14)
+    st = sim.stats()
+    assert st["pair_collisions"] == 1
+    assert st["momentum"][0] == pytest.approx(m1 * v1 + m2 * v2, abs=1e-14)
+    assert st["kinetic_energy"] == pytest.approx(0.5 * (m1 * v1**2 + m2 * v2**2), rel=1e-14)
+    if scheme == "event":
+        t_hit = 0.3 / 1.5
+        x1 = 0.3 + v1 * t_hit + e1 * (0.25 - t_hit)
+        x2 = 0.7 + v2 * t_hit + e2 * (0.25 - t_hit)
+        assert s.pos[:, 0] == pytest.approx([x1, x2], abs=1e-14)
+
+
+def test_glancing_equal_masses_leave_at_right_angles(circles_cpu):
+    """Equal masses, target at rest, impact parameter b = s / 2: at contact the
+    normal makes 30 degrees with x, the target leaves along it with speed
+    cos 30, the bullet at right angles to it."""
+    s = 2 * R
+    sim = two(circles_cpu, [[0.2, 0.5], [0.6, 0.5 + 0.5 * s]], [[1.0, 0.0], [0.0, 0.0]],
+              [1.0, 1.0], dt=0.01)
+    sim.advance(0.4)
+    v1, v2 = sim.state().vel
+    assert sim.stats()["pair_collisions"] == 1
+    assert np.dot(v1, v2) == pytest.approx(0.0, abs=1e-14)
+    c30 = math.cos(math.pi / 6)
+    assert v2 == pytest.approx([c30 * c30, c30 * 0.5], abs=1e-14)
+    assert v1 == pytest.approx([0.25, -c30 * 0.5], abs=1e-14)
+
+
+def test_glancing_discrete_also_right_angles(circles_cpu):
+    """The discrete scheme collides at an overlapping position, so the angle
+    is off, but with equal masses and a target at rest the impulse along any
+    normal leaves the two at right angles with the energy unchanged."""
+    s = 2 * R
+    sim = two(circles_cpu, [[0.2, 0.5], [0.6, 0.5 + 0.5 * s]], [[1.0, 0.0], [0.0, 0.0]],
+              [1.0, 1.0], scheme="discrete", dt=0.013)
+    sim.advance(0.4)
+    v1, v2 = sim.state().vel
+    assert sim.stats()["pair_collisions"] == 1
+    assert np.dot(v1, v2) == pytest.approx(0.0, abs=1e-14)
+    assert np.dot(v1, v1) + np.dot(v2, v2) == pytest.approx(1.0, rel=1e-14)
+
+
+def test_mass_ratio_1e6_light_on_heavy(circles_cpu):
+    """A light circle (m = 1) bounces off a heavy one (m = 1e6) at rest:
+    v1' = (1 - 1e6) / (1 + 1e6) v, v2' = 2 / (1 + 1e6) v. Almost all energy
+    stays with the light circle, so the energy check (1e-12 relative, f64) is
+    sensitive to the cancellation the impulse form avoids."""
+    m1, m2 = 1.0, 1e6
+    sim = two(circles_cpu, [[0.3, 0.5], [0.7, 0.5]], [[1.0, 0.0], [0.0, 0.0]], [m1, m2],
+              radius=(0.02, 0.1), dt=0.01)
+    e0 = sim.stats()["kinetic_energy"]
+    sim.advance(0.5)
+    st = sim.stats()
+    v = sim.state().vel
+    assert st["pair_collisions"] == 1
+    assert v[0, 0] == pytest.approx((m1 - m2) / (m1 + m2), rel=1e-14)
+    assert v[1, 0] == pytest.approx(2 * m1 / (m1 + m2), rel=1e-12)
+    assert abs(st["kinetic_energy"] - e0) <= 1e-12 * e0
+    e_state = 0.5 * np.sum(sim.state().mass * np.sum(v * v, axis=1))
+    assert abs(e_state - e0) <= 1e-12 * e0
+
+
+def test_mass_ratio_1e6_piston(circles_cpu):
+    """A light circle trapped between a wall and a slowly advancing heavy one
+    (m ratio 1e6) gains 0.1 of speed at every bounce, each time beyond the
+    largest speed at the step's start that the grid's margin assumed.
+    Over ~20 collisions: the same events as the exact reference, energy
+    conserved to 1e-12 relative, the light circle's final speed within 1e-9
+    of the reference's (each bounce adds ~1e-16 relative round-off and the
+    1-D motion does not amplify it)."""
+    pos = np.array([[0.2, 0.5], [0.8, 0.5]])
+    vel = np.array([[1.0, 0.0], [-0.05, 0.0]])
+    r = np.array([0.02, 0.1])
+    m = np.array([1.0, 1e6])
+    T = 9.0
+    ref = Reference(pos, vel, r, m, box=BOX).run(until=T)
+    sim = circles_cpu.Simulation.from_arrays(pos, vel, r, mass=m, box=BOX, boundary="walls",
+                                             scheme="event", precision="f64", dt=0.05,
+                                             record_events=1024)
+    e0 = sim.stats()["kinetic_energy"]
+    sim.advance(T)
+    st = sim.stats()
+    assert ref.pair_collisions >= 10
+    assert [tuple(e[1:]) for e in np.asarray(sim.events()).astype(int).tolist()] == \
+        [e[1:] for e in ref.events]
+    assert st["pair_collisions"] == ref.pair_collisions
+    assert abs(st["kinetic_energy"] - e0) <= 1e-12 * e0
+    v = sim.state().vel
+    assert v[0] == pytest.approx(ref.vel[0], rel=1e-9)
+    assert v[1] == pytest.approx(ref.vel[1], rel=1e-9)
+
+
+BULLET_DT = 0.1
+BULLET_SPEED = 20 * 2 * R / BULLET_DT  # 20 diameters per step
+
+
+def bullet(circles, scheme):
+    """A bullet (m = 1) moving 20 diameters per step toward a target (m = 3)
+    at rest 9 diameters away, in a box far larger than one step's travel."""
+    return circles.Simulation.from_arrays(
+        np.array([[2.0, 5.0], [3.0, 5.0]]), np.array([[BULLET_SPEED, 0.0], [0.0, 0.0]]),
+        np.array([R, R]), mass=np.array([1.0, 3.0]), box=(10.0, 10.0), boundary="walls",
+        scheme=scheme, precision="f64", dt=BULLET_DT)
+
+
+def test_event_scheme_fast_bullet_hits(circles_cpu):
+    """Event scheme: the hit happens at t = 0.9 / 20 = 0.045 inside the single
+    step, with the 1-D result v1' = -v/2, v2' = v/2, and both circles where the
+    exact motion puts them at t = dt."""
+    sim = bullet(circles_cpu, "event")
+    sim.step(1)
+    assert sim.time == pytest.approx(BULLET_DT, rel=1e-15)
+    st = sim.stats()
+    assert st["pair_collisions"] == 1
+    s = sim.state()
+    v = BULLET_SPEED
+    assert s.vel == pytest.approx(np.array([[-v / 2, 0.0], [v / 2, 0.0]]), rel=1e-14, abs=1e-14)
+    t_hit = 0.9 / v
+    x1 = 2.0 + v * t_hit - v / 2 * (BULLET_DT - t_hit)
+    x2 = 3.0 + v / 2 * (BULLET_DT - t_hit)
+    assert s.pos == pytest.approx(np.array([[x1, 5.0], [x2, 5.0]]), abs=1e-13)
+
+
+def test_discrete_scheme_fast_bullet_tunnels(circles_cpu):
+    """The known error of the discrete scheme: it only sees overlap at the end
+    of a step, and after one step the bullet is already a full 10 diameters
+    beyond the target. No collision happens; both keep their velocities."""
+    sim = bullet(circles_cpu, "discrete")
+    sim.step(1)
+    st = sim.stats()
+    s = sim.state()
+    assert st["pair_collisions"] == 0
+    assert np.array_equal(s.vel, np.array([[BULLET_SPEED, 0.0], [0.0, 0.0]]))
+    assert s.pos[0, 0] == pytest.approx(4.0, abs=1e-14)
+    assert s.pos[0, 0] - s.pos[1, 0] == pytest.approx(1.0, abs=1e-14)

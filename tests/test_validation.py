@@ -1,0 +1,168 @@
+"""Bad input is refused with a ValueError that names the offending value and
+the limit it breaks, before any work is done.
+
+Messages are matched loosely: the offending value must appear (as Python
+prints it, or a short form of it) and, where the limit is a number or a list
+of choices, the limit too; wording is free.
+"""
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+DENSEST = math.pi / math.sqrt(12.0)  # 0.9069, hexagonal packing of equal disks
+ZERO = r"(?<![\d.])0(\.0*)?(?![\d.])"  # 0 or 0.0 standing alone (not 0.01, not 10)
+
+
+def number(x):
+    """Regex for the number x standing alone, as Python prints it or as an
+    integer-valued float (-1 or -1.0)."""
+    text = re.escape(repr(float(x)) if not float(x).is_integer() else str(int(x)))
+    return rf"(?<![\d.]){text}(\.0*)?(?![\d])"
+
+
+def refused(fn, value, limit=None):
+    """``fn()`` raises ValueError whose message matches ``value`` and ``limit``
+    (regexes); returns the message."""
+    with pytest.raises(ValueError, match=value) as info:
+        fn()
+    message = str(info.value)
+    if limit is not None:
+        assert re.search(limit, message), f"limit {limit!r} not named in: {message}"
+    return message
+
+
+def scene(circles, **kw):
+    """A valid small scene with ``kw`` changed; made into a Simulation so that
+    a check done at either stage counts."""
+    base = dict(n=100, box=(2.0, 1.0), radius=(0.01, 0.02), speed=(0.5, 1.0), mass="radius",
+                boundary="walls", scheme="event", precision="f64", dt=None, seed=0)
+    base.update(kw)
+    return lambda: circles.Simulation(circles.Scene(**base))
+
+
+@pytest.mark.parametrize("n", [0, -3])
+def test_n_not_positive(circles_cpu, n):
+    refused(scene(circles_cpu, n=n), number(n), r"(?<![\d.])[01](?![\d.])")
+
+
+@pytest.mark.parametrize("radius, shown", [(0.0, ZERO), (-0.01, number(-0.01)),
+                                           ((-0.01, 0.02), number(-0.01)), ((0.0, 0.02), ZERO)])
+def test_radius_not_positive(circles_cpu, radius, shown):
+    refused(scene(circles_cpu, radius=radius), shown, ZERO)
+
+
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_radius_larger_than_box(circles_cpu, boundary):
+    """Diameter 1.2 in a box whose short side is 1."""
+    refused(scene(circles_cpu, n=1, radius=0.6, boundary=boundary), r"0\.6|1\.2", number(1))
+
+
+@pytest.mark.parametrize("box, shown", [((0.0, 1.0), ZERO), ((2.0, -1.0), number(-1))])
+def test_box_side_not_positive(circles_cpu, box, shown):
+    refused(scene(circles_cpu, box=box), shown, ZERO)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("radius", float("nan")),
+    ("radius", (0.01, float("inf"))),
+    ("box", (float("inf"), 1.0)),
+    ("speed", (0.5, float("nan"))),
+    ("dt", float("nan")),
+    ("dt", float("inf")),
+])
+def test_non_finite_numbers(circles_cpu, field, value):
+    refused(scene(circles_cpu, **{field: value}), r"(?i)nan|inf")
+
+
+@pytest.mark.parametrize("field, value, limit", [
+    ("scheme", "rk4", "event"),
+    ("boundary", "mirror", "periodic"),
+    ("mass", "volume", "area"),
+    ("precision", "f16", "f64"),
+])
+def test_unknown_names(circles_cpu, field, value, limit):
+    refused(scene(circles_cpu, **{field: value}), value, limit)
+
+
+def test_unknown_arch(circles_cpu):
+    refused(lambda: circles_cpu.init(arch="tpu"), "tpu", "cpu")
+
+
+@pytest.mark.parametrize("dt, shown", [(0.0, ZERO), (-0.5, number(-0.5))])
+def test_dt_not_positive(circles_cpu, dt, shown):
+    refused(scene(circles_cpu, dt=dt), shown, ZERO)
+
+
+@pytest.mark.parametrize("n, radius, fraction", [
+    (121, 0.05, 121 * math.pi * 0.05**2),                         # equal radii: 0.9503
+    (120, (0.04, 0.06), 120 * math.pi * (0.04**2 + 0.04 * 0.06 + 0.06**2) / 3),  # 0.9550
+])
+def test_area_fraction_beyond_densest_packing(circles_cpu, n, radius, fraction):
+    """In a unit box; the message names the fraction (2 decimals at least,
+    rounded or cut) and the densest packing 0.9069 (3 decimals at least)."""
+    assert fraction > DENSEST
+    shown = "|".join(re.escape(f"{x:.2f}") for x in (fraction, math.floor(fraction * 100) / 100))
+    refused(scene(circles_cpu, n=n, box=(1.0, 1.0), radius=radius), shown, r"0\.9(07|069)|0\.91\b")
+
+
+# ---- Simulation.from_arrays ----------------------------------------------
+
+def arrays(n=4):
+    pos = np.array([[0.2, 0.2], [0.6, 0.2], [0.2, 0.6], [0.6, 0.6]])[:n]
+    vel = np.full((n, 2), 0.3)
+    radius = np.full(n, 0.05)
+    return pos, vel, radius
+
+
+def from_arrays(circles, pos=None, vel=None, radius=None, **kw):
+    p, v, r = arrays()
+    p = p if pos is None else pos
+    v = v if vel is None else vel
+    r = r if radius is None else radius
+    kw.setdefault("box", (1.0, 1.0))
+    return lambda: circles.Simulation.from_arrays(p, v, r, **kw)
+
+
+def test_from_arrays_non_finite(circles_cpu):
+    p, v, r = arrays()
+    p[2, 1] = np.nan
+    refused(from_arrays(circles_cpu, pos=p), r"(?i)nan")
+    p, v, r = arrays()
+    v[1, 0] = np.inf
+    refused(from_arrays(circles_cpu, vel=v), r"(?i)inf")
+    refused(from_arrays(circles_cpu, box=(1.0, np.inf)), r"(?i)inf")
+
+
+def test_from_arrays_radius_not_positive(circles_cpu):
+    p, v, r = arrays()
+    r[3] = -0.02
+    refused(from_arrays(circles_cpu, radius=r), number(-0.02), ZERO)
+
+
+def test_from_arrays_radius_larger_than_box(circles_cpu):
+    p, v, r = arrays(1)
+    refused(from_arrays(circles_cpu, pos=np.array([[0.5, 0.5]]), vel=v, radius=np.array([0.7])),
+            r"0\.7|1\.4", number(1))
+
+
+def test_from_arrays_box_and_names(circles_cpu):
+    refused(from_arrays(circles_cpu, box=(1.0, 0.0)), ZERO)
+    refused(from_arrays(circles_cpu, scheme="verlet"), "verlet", "event")
+    refused(from_arrays(circles_cpu, boundary="open"), "open", "walls")
+    refused(from_arrays(circles_cpu, mass="volume"), "volume", "radius")
+    refused(from_arrays(circles_cpu, precision="f128"), "f128", "f32")
+    refused(from_arrays(circles_cpu, dt=-1.0), number(-1), ZERO)
+
+
+def test_from_arrays_masses_not_positive(circles_cpu):
+    refused(from_arrays(circles_cpu, mass=np.array([1.0, 0.0, 1.0, 1.0])), ZERO)
+    refused(from_arrays(circles_cpu, mass=np.array([1.0, 1.0, -2.0, 1.0])), number(-2))
+
+
+def test_from_arrays_shapes_disagree(circles_cpu):
+    p, v, r = arrays()
+    refused(from_arrays(circles_cpu, vel=v[:3]), number(3), number(4))
+    refused(from_arrays(circles_cpu, radius=r[:2]), number(2), number(4))
