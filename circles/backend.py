@@ -18,7 +18,7 @@ def init(arch: str = "auto", **options) -> str:
     """
     if arch not in ARCHES:
         raise ValueError(f"arch {arch!r} is unknown: use one of {', '.join(ARCHES)}")
-    options.setdefault("log_level", ti.WARN)
+    options.setdefault("log_level", ti.ERROR)
     if _state["initialized"]:
         ti.reset()
     if arch == "cpu":

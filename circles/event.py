@@ -105,18 +105,31 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p
     return ti.cast(scalars[0], ti.f64)
 
 
+@ti.func
+def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+                          sorted_ids: ti.template(), ncx, ncy, sx, sy, periodic: ti.template()):
+    c = cell_of[i]
+    for a, b in ti.ndrange(sx, sy):
+        c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
+        if c2 >= 0:
+            for k in range(cell_start[c2], cell_start[c2 + 1]):
+                dirty[sorted_ids[k]] = 1
+
+
 @ti.kernel
-def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr,
-                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32,
-                sy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-                real: ti.template(), periodic: ti.template(), from_below: ti.template()) -> ti.i32:
-    """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)); returns how many D decreased.
+def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_in: ndarr,
+                active_out: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+                sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+                real: ti.template(), periodic: ti.template()) -> ti.i32:
+    """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)) over the active circles; returns how many D decreased.
 
     F_kl(s) is the earliest time at which k, on its straight path, can meet l when l leaves
     its straight path at s: with T = max(s, tau_k, tau_l), g the straight-path gap at T and
     dv their relative velocity, contact needs g - |dv| (t - T) <= 2 vlim (t - s), so
     F = (g + |dv| T + 2 vlim s) / (|dv| + 2 vlim) >= s. F is monotone in s, so the sweeps
-    decrease D towards the unique fixed point whatever the order of updates.
+    decrease D towards the unique fixed point whatever the order of updates. A circle whose
+    D decreased marks its neighbours active for the next sweep (`active_out`); nothing else
+    can change, so the sweeps end when no circle is active.
     """
     n = pos.shape[0]
     box = ti.Vector([box_w, box_h], dt=real)
@@ -124,13 +137,14 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
     two_v = ti.cast(2.0 * vlim, real)
     changed = 0
     for k in range(n):
+        if active_in[k] == 0:
+            continue
+        active_in[k] = 0
         xk = pos[k]
         vk = vel[k]
         rk = radius[k]
         tk = tau[k]
         dk = d[k]
-        if ti.static(from_below):
-            dk = horizon
         c = cell_of[k]
         for a, b in ti.ndrange(sx, sy):
             c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
@@ -147,26 +161,11 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
                         arrival = ti.max(s, (ti.max(gap, 0.0) + dv * t0 + two_v * s) / (dv + two_v))
                         if arrival < dk:
                             dk = arrival
-        if ti.static(from_below):
-            if dk > d[k]:
-                d[k] = dk
-                changed += 1
-        else:
-            if dk < d[k]:
-                d[k] = dk
-                changed += 1
+        if dk < d[k]:
+            d[k] = dk
+            changed += 1
+            mark_neighbours_dirty(k, active_out, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
     return changed
-
-
-@ti.func
-def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
-                          sorted_ids: ti.template(), ncx, ncy, sx, sy, periodic: ti.template()):
-    c = cell_of[i]
-    for a, b in ti.ndrange(sx, sy):
-        c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-        if c2 >= 0:
-            for k in range(cell_start[c2], cell_start[c2 + 1]):
-                dirty[sorted_ids[k]] = 1
 
 
 @ti.kernel

@@ -231,6 +231,8 @@ class Simulation:
         self._ev_p = ti.ndarray(ti.i32, shape=n)
         self._dirty = ti.ndarray(ti.i32, shape=n)
         self._d1 = ti.ndarray(real, shape=n)
+        self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
+        reductions.fill_i32(self._active[1], 0)
         self._backup = {name: self._like(getattr(self, name))
                         for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
         self._event_arrays = True
@@ -364,10 +366,12 @@ class Simulation:
                 break
             # Only bounds below t_end matter (events lie in [0, t_end]): start the sweeps there.
             reductions.fill_real(self._d1, t_end)
+            reductions.fill_i32(self._active[0], 1)
             for sweep in range(MAX_BOUND_SWEEPS + 1):
-                if event.bound_sweep(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *g, w, hgt,
-                                     t_end, vlim, real, periodic, False) == 0:
-                    break
+                act_in, act_out = self._active[sweep % 2], self._active[(sweep + 1) % 2]
+                if event.bound_sweep(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, act_in,
+                                     act_out, *g, w, hgt, t_end, vlim, real, periodic) == 0:
+                    break  # nothing decreased, so nothing was marked: both flag arrays are clear
             else:
                 raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
             self.sweeps += sweep + 1
