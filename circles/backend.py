@@ -19,6 +19,9 @@ def init(arch: str = "auto", **options) -> str:
     if arch not in ARCHES:
         raise ValueError(f"arch {arch!r} is unknown: use one of {', '.join(ARCHES)}")
     options.setdefault("log_level", ti.ERROR)
+    # No reassociation of floating-point arithmetic: pair arithmetic must round the same way
+    # whichever circle of a pair comes first, so results do not depend on memory order.
+    options.setdefault("fast_math", False)
     if _state["initialized"]:
         ti.reset()
     if arch == "cpu":

@@ -5,7 +5,8 @@ elastic impulse, then reflects circles that crossed a wall by mirroring their po
 Pairs are resolved race-free and deterministically: in each round every circle picks, among
 its overlapping approaching neighbours, the pair that touched first (largest overlap over
 approach speed, ties by ids), and mutual picks are resolved together. The pair with the
-smallest key overall is always mutual, so each round resolves at least one pair.
+smallest key overall is always mutual, so each round resolves at least one pair. After the
+first round only circles next to a resolved pair pick again; the others' picks still hold.
 
 Known errors of the method, which the benchmark measures: a circle faster than about a
 diameter per step can pass through another (tunnelling), overlap is left behind, and
@@ -13,6 +14,7 @@ collisions can be missed or counted twice.
 """
 import taichi as ti
 
+from .event import mark_neighbours_dirty
 from .geometry import NEVER, displacement, key_less, neighbour_cell
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -34,13 +36,17 @@ def move(pos: ndarr, vel: ndarr, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, real:
 
 
 @ti.kernel
-def pick(pos: ndarr, vel: ndarr, radius: ndarr, partner: ndarr, key_t: ndarr,
+def pick(pos: ndarr, vel: ndarr, radius: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr, dirty: ndarr,
          cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
          box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(), periodic: ti.template()):
     n = pos.shape[0]
     box = ti.Vector([box_w, box_h], dt=real)
     counters[0] = 0
     for i in range(n):
+        # A circle keeps its pick unless a pair near it was resolved (see resolve).
+        if dirty[i] == 0:
+            continue
+        dirty[i] = 0
         best = ti.cast(NEVER, real)
         best_lo = n
         best_hi = n
@@ -63,15 +69,18 @@ def pick(pos: ndarr, vel: ndarr, radius: ndarr, partner: ndarr, key_t: ndarr,
                             if vn < 0:
                                 # -(time since first contact at the current speeds): earliest first.
                                 key = -(s - dist) / (-vn)
-                                if key_less(key, lo, hi, best, best_lo, best_hi):
-                                    best, best_lo, best_hi, best_p = key, lo, hi, j
+                                klo = ti.min(ids[i], ids[j])
+                                khi = ti.max(ids[i], ids[j])
+                                if key_less(key, klo, khi, best, best_lo, best_hi):
+                                    best, best_lo, best_hi, best_p = key, klo, khi, j
         partner[i] = best_p
         key_t[i] = best
 
 
 @ti.kernel
-def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, partner: ndarr, pair_count: ndarr,
-            virial: ndarr, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
+def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, pair_count: ndarr,
+            virial: ndarr, dirty: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
+            ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
             periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=real)
     for i in range(pos.shape[0]):
@@ -84,11 +93,15 @@ def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, partner: nda
                 wi = inv_mass[i]
                 wj = inv_mass[j]
                 jmp = 2.0 * vn / (wi + wj)
-                vel[i] = vel[i] + wi * jmp * nrm
-                vel[j] = vel[j] - wj * jmp * nrm
-                pair_count[i] += 1
-                virial[i] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+                # Same expression for both circles: rounding does not depend on which one is i.
+                vel[i] = vel[i] + (wi * jmp) * nrm
+                vel[j] = vel[j] + (wj * jmp) * (-nrm)
+                owner = i if ids[i] < ids[j] else j
+                pair_count[owner] += 1
+                virial[owner] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
                 ti.atomic_add(counters[0], 1)
+                mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
 
 
 @ti.kernel

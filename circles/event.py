@@ -55,7 +55,7 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
 
 
 @ti.kernel
-def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p: ndarr, dirty: ndarr,
+def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr, dirty: ndarr,
             cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
             real: ti.template(), periodic: ti.template()) -> ti.f64:
@@ -84,8 +84,8 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p
                     elif vi[axis] > 0:
                         t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
                         w = 2 * axis + 1
-                    if t <= horizon and key_less(t, i, n + w, best_t, best_lo, best_hi):
-                        best_t, best_lo, best_hi, best_p = t, i, n + w, -1 - w
+                    if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
+                        best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
             c = cell_of[i]
             for a, b in ti.ndrange(sx, sy):
                 c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
@@ -96,8 +96,11 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p
                             lo = ti.min(i, j)
                             hi = ti.max(i, j)
                             t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
-                            if t <= horizon and key_less(t, lo, hi, best_t, best_lo, best_hi):
-                                best_t, best_lo, best_hi, best_p = t, lo, hi, j
+                            # Keys use creation ids, so ties break the same whatever the memory order.
+                            klo = ti.min(ids[i], ids[j])
+                            khi = ti.max(ids[i], ids[j])
+                            if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
+                                best_t, best_lo, best_hi, best_p = t, klo, khi, j
             ev_t[i] = best_t
             ev_p[i] = best_p
     for i in range(n):
@@ -169,7 +172,7 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
 
 
 @ti.kernel
-def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ev_t: ndarr, ev_p: ndarr,
+def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
             bound_t: ndarr, dirty: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
             cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, t_offset: ti.f64, scalars: ndarr, counters: ndarr,
@@ -209,7 +212,7 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                         slot = ti.atomic_add(counters[1], 1)
                         if slot < log_t.shape[0]:
                             log_t[slot] = t_offset + ti.cast(e, ti.f64)
-                            log_i[slot] = i
+                            log_i[slot] = ids[i]
                             log_j[slot] = p
             elif p > i and ev_p[p] == i and ev_t[p] == e and e <= bound_t[p]:
                 j = p
@@ -225,8 +228,10 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                 execute_it = True
                 if vn < 0:
                     jmp = 2.0 * vn / (wi + wj)
-                    vi_new = vi + wi * jmp * nrm
-                    vj_new = vj - wj * jmp * nrm
+                    # One expression for both circles, each with the normal towards its partner, so
+                    # the rounding (fused or not) does not depend on which circle is i.
+                    vi_new = vi + (wi * jmp) * nrm
+                    vj_new = vj + (wj * jmp) * (-nrm)
                     if (vi_new.norm_sqr() > vlim2 or vj_new.norm_sqr() > vlim2) and e < horizon:
                         # Faster than the grid allows: end the step here (see module docstring).
                         ti.atomic_min(scalars[1], e)
@@ -234,14 +239,16 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     else:
                         vi = vi_new
                         vj = vj_new
-                        pair_count[i] += 1
-                        virial[i] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+                        # Sums go to the circle of lower creation id (j's thread is idle: its event is this one).
+                        owner = i if ids[i] < ids[j] else j
+                        pair_count[owner] += 1
+                        virial[owner] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
                         if ti.static(record):
                             slot = ti.atomic_add(counters[1], 1)
                             if slot < log_t.shape[0]:
                                 log_t[slot] = t_offset + ti.cast(e, ti.f64)
-                                log_i[slot] = i
-                                log_j[slot] = j
+                                log_i[slot] = ti.min(ids[i], ids[j])
+                                log_j[slot] = ti.max(ids[i], ids[j])
                 if execute_it:
                     pos[i] = xi
                     pos[j] = xj

@@ -32,6 +32,8 @@ DISCRETE_MAX_ROUNDS = 16
 MELT_COLLISIONS_PER_CIRCLE = 10
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
+#: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
+REORDER_EVERY = 16
 #: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
 INPUT_OVERLAP_TOLERANCE = 1e-9
 
@@ -189,21 +191,18 @@ class Simulation:
         self.vel = ti.Vector.ndarray(2, real, shape=n)
         self.radius = ti.ndarray(real, shape=n)
         self.inv_mass = ti.ndarray(real, shape=n)
-        self.pos.from_numpy(np.asarray(pos, dtype=self._np_real))
-        self.vel.from_numpy(np.asarray(vel, dtype=self._np_real))
-        self.radius.from_numpy(self._radius.astype(self._np_real))
-        self.inv_mass.from_numpy((1.0 / self._mass).astype(self._np_real))
+        # Internally circles are kept in grid-cell order; `_ids[slot]` is the creation id.
+        self.ids = ti.ndarray(ti.i32, shape=n)
+        self._ids = np.arange(n)
         # Per-circle sums (a pair counts on its lower id): summed in a fixed order by stats(),
         # so they are the same whatever the thread count.
         self.pair_count = ti.ndarray(ti.i32, shape=n)
         self.wall_count = ti.ndarray(ti.i32, shape=n)
         self.virial = ti.ndarray(ti.f64, shape=n)
         self.wall_impulse = ti.ndarray(ti.f64, shape=n)
-        for arr in (self.pair_count, self.wall_count):
-            reductions.fill_i32(arr, 0)
-        for arr in (self.virial, self.wall_impulse):
-            reductions.fill_real(arr, 0.0)
         self.grid = Grid(n, self.box, self.periodic)
+        self._upload(np.asarray(pos, dtype=np.float64), np.asarray(vel, dtype=np.float64), np.zeros(n, np.int32),
+                     np.zeros(n, np.int32), np.zeros(n), np.zeros(n))
         self._speed_out = ti.ndarray(ti.f64, shape=2)
         self._overlap_out = ti.ndarray(ti.f64, shape=1)
         self._counters = ti.ndarray(ti.i32, shape=2)
@@ -219,6 +218,8 @@ class Simulation:
             self._alloc_event_arrays()
         if scheme == "discrete":
             self._partner = ti.ndarray(ti.i32, shape=n)
+            if not self._event_arrays:
+                self._dirty = ti.ndarray(ti.i32, shape=n)
             self._key = ti.ndarray(real, shape=n)
 
     def _alloc_event_arrays(self):
@@ -244,6 +245,48 @@ class Simulation:
             return ti.Vector.ndarray(arr.n, arr.dtype, shape=arr.shape)
         return ti.ndarray(arr.dtype, shape=arr.shape)
 
+    def _cell_order(self, pos):
+        """Creation ids sorted by grid cell (row-major cells two largest radii wide), ties by id."""
+        w, h = self.box
+        side = max(2.0 * self._rmax, math.sqrt(w * h / max(self.n, 1)))
+        ncx, ncy = max(1, int(w / side)), max(1, int(h / side))
+        cx = np.clip((pos[:, 0] * (ncx / w)).astype(np.int64), 0, ncx - 1)
+        cy = np.clip((pos[:, 1] * (ncy / h)).astype(np.int64), 0, ncy - 1)
+        return np.lexsort((np.arange(self.n), cy * ncx + cx))
+
+    def _upload(self, pos, vel, pair_count, wall_count, virial, wall_impulse):
+        """Store circles given in creation order, in cell order."""
+        order = self._cell_order(pos)
+        self._ids = order
+        self.ids.from_numpy(order.astype(np.int32))
+        self.pos.from_numpy(pos[order].astype(self._np_real))
+        self.vel.from_numpy(vel[order].astype(self._np_real))
+        self.radius.from_numpy(self._radius[order].astype(self._np_real))
+        self.inv_mass.from_numpy((1.0 / self._mass[order]).astype(self._np_real))
+        self.pair_count.from_numpy(pair_count[order].astype(np.int32))
+        self.wall_count.from_numpy(wall_count[order].astype(np.int32))
+        self.virial.from_numpy(virial[order].astype(np.float64))
+        self.wall_impulse.from_numpy(wall_impulse[order].astype(np.float64))
+
+    def _creation_order(self, arr):
+        """An internal per-circle array (numpy) put back in creation order."""
+        out = np.empty_like(arr)
+        out[self._ids] = arr
+        return out
+
+    def _download(self):
+        """(pos, vel, pair_count, wall_count, virial, wall_impulse) in creation order, exactly as stored."""
+        return tuple(self._creation_order(a.to_numpy()) for a in
+                     (self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse))
+
+    def _reorder(self):
+        """Sort the arrays by grid cell again, so that neighbours stay close in memory.
+
+        Results do not depend on the memory order: event keys and the owners of per-circle
+        sums are creation ids, and pair arithmetic is symmetric in the two circles.
+        """
+        self._upload(*self._download())
+
     def _melt(self, rng, scale=1.0):
         """Run the event scheme from the lattice until it is forgotten, then restore the start velocities.
 
@@ -252,8 +295,8 @@ class Simulation:
         target = None
         if scale < 1.0:
             target = ti.ndarray(ti.f64, shape=self.n)
-            target.from_numpy(self._radius)
-            self.radius.from_numpy((self._radius * scale).astype(self._np_real))
+            target.from_numpy(self._radius[self._ids])
+            self.radius.from_numpy((self._radius[self._ids] * scale).astype(self._np_real))
         start_vel = self.vel.to_numpy()
         speeds = np.sqrt((start_vel.astype(np.float64) ** 2).sum(axis=1))
         if speeds.max() <= 0:
@@ -280,7 +323,7 @@ class Simulation:
             raise ValueError(f"could not grow {short} of {self.n} circles to their radii in a {self.box[0]} x "
                              f"{self.box[1]} box: the area fraction is too close to jamming for these radii; "
                              "use fewer or smaller circles or a bigger box")
-        self.radius.from_numpy(self._radius.astype(self._np_real))
+        self.radius.from_numpy(self._radius[self._ids].astype(self._np_real))
         self.vel.from_numpy(start_vel)
         for arr in (self.pair_count, self.wall_count):
             reductions.fill_i32(arr, 0)
@@ -288,6 +331,7 @@ class Simulation:
             reductions.fill_real(arr, 0.0)
         reductions.fill_i32(self._counters, 0)
         self.time, self.steps, self.rounds, self.redone_steps = 0.0, 0, 0, 0
+        self._reorder()
 
     # ---------------------------------------------------------------- stepping
     def advance(self, duration: float):
@@ -300,6 +344,8 @@ class Simulation:
             h = min(self.dt, end - self.time)
             self.time += self._step(h)
             self.steps += 1
+            if self.steps % REORDER_EVERY == 0:
+                self._reorder()
         self.time = end
         self._check_finite()
         return self
@@ -314,6 +360,8 @@ class Simulation:
                 done += self._step(self.dt - done)
             self.time += self.dt
             self.steps += 1
+            if self.steps % REORDER_EVERY == 0:
+                self._reorder()
         self._check_finite()
         return self
 
@@ -360,7 +408,7 @@ class Simulation:
         reductions.fill_i32(self._dirty, 1)
         self._set_scalars(NEVER, NEVER)
         while True:
-            tmin = event.predict(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._ev_p, self._dirty,
+            tmin = event.predict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p, self._dirty,
                                  *g, w, hgt, t_end, self._scalars, real, periodic)
             if tmin > t_end:
                 break
@@ -375,7 +423,8 @@ class Simulation:
             else:
                 raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
             self.sweeps += sweep + 1
-            executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self._ev_t, self._ev_p,
+            executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
+                                     self._ev_p,
                                      self._d1, self._dirty, self.pair_count, self.wall_count, self.virial,
                                      self.wall_impulse, *g, w, hgt, t_end, vlim, self.time, self._scalars,
                                      self._counters, self._log_t, self._log_i, self._log_j, real, periodic, record)
@@ -403,11 +452,12 @@ class Simulation:
         discrete.move(self.pos, self.vel, h, w, hgt, real, periodic)
         self.grid.build(self.pos, 2.0 * self._rmax)
         g = self.grid.args()
+        reductions.fill_i32(self._dirty, 1)
         for _ in range(DISCRETE_MAX_ROUNDS):
-            discrete.pick(self.pos, self.vel, self.radius, self._partner, self._key, *g, w, hgt, self._counters,
-                          real, periodic)
-            discrete.resolve(self.pos, self.vel, self.radius, self.inv_mass, self._partner, self.pair_count,
-                             self.virial, w, hgt, self._counters, real, periodic)
+            discrete.pick(self.pos, self.vel, self.radius, self.ids, self._partner, self._key, self._dirty, *g, w, hgt,
+                          self._counters, real, periodic)
+            discrete.resolve(self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self.pair_count,
+                             self.virial, self._dirty, *g, w, hgt, self._counters, real, periodic)
             self.rounds += 1
             if self._counters.to_numpy()[0] == 0:
                 break
@@ -434,21 +484,23 @@ class Simulation:
                                             self._overlap_out, self.periodic))
 
     def state(self) -> State:
-        return State(pos=self.pos.to_numpy().astype(np.float64), vel=self.vel.to_numpy().astype(np.float64),
-                     radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy())
+        pos = self._creation_order(self.pos.to_numpy()).astype(np.float64)
+        vel = self._creation_order(self.vel.to_numpy()).astype(np.float64)
+        return State(pos=pos, vel=vel, radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy())
 
     def stats(self) -> dict:
         """Totals since the start; sums in float64 (see DESIGN.md for the pressure formulas)."""
-        vel = self.vel.to_numpy().astype(np.float64)
+        pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
+        vel = vel.astype(np.float64)
         m = self._mass
         return {
             "time": self.time,
             "kinetic_energy": float(0.5 * np.sum(m * (vel[:, 0] ** 2 + vel[:, 1] ** 2))),
             "momentum": (float(np.sum(m * vel[:, 0])), float(np.sum(m * vel[:, 1]))),
-            "pair_collisions": self._pair_collisions(),
-            "wall_collisions": int(self.wall_count.to_numpy().sum(dtype=np.int64)),
-            "virial": float(np.sum(self.virial.to_numpy())),
-            "wall_impulse": float(np.sum(self.wall_impulse.to_numpy())),
+            "pair_collisions": int(pair_count.sum(dtype=np.int64)),
+            "wall_collisions": int(wall_count.sum(dtype=np.int64)),
+            "virial": float(np.sum(virial)),
+            "wall_impulse": float(np.sum(wall_impulse)),
             "max_overlap": self._max_overlap(),
         }
 
@@ -473,11 +525,12 @@ class Simulation:
 
     # ------------------------------------------------------------ save / load
     def save(self, path):
-        np.savez(path, pos=self.pos.to_numpy(), vel=self.vel.to_numpy(), radius=self._radius, mass=self._mass,
+        """Write the state exactly (in the working precision, creation order) to an .npz file."""
+        pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
+        np.savez(path, pos=pos, vel=vel, radius=self._radius, mass=self._mass,
                  color=self._color, box=np.array(self.box), boundary=self.boundary, scheme=self.scheme,
                  precision=self.precision, dt=self.dt, time=self.time, steps=self.steps,
-                 pair_count=self.pair_count.to_numpy(), wall_count=self.wall_count.to_numpy(),
-                 virial=self.virial.to_numpy(), wall_impulse=self.wall_impulse.to_numpy())
+                 pair_count=pair_count, wall_count=wall_count, virial=virial, wall_impulse=wall_impulse)
 
     @classmethod
     def load(cls, path) -> "Simulation":
@@ -488,12 +541,7 @@ class Simulation:
         sim.scene = None
         sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
                    str(d["scheme"]), str(d["precision"]), float(d["dt"]), 0)
-        sim.pos.from_numpy(d["pos"])
-        sim.vel.from_numpy(d["vel"])
-        sim.pair_count.from_numpy(d["pair_count"])
-        sim.wall_count.from_numpy(d["wall_count"])
-        sim.virial.from_numpy(d["virial"])
-        sim.wall_impulse.from_numpy(d["wall_impulse"])
+        sim._upload(d["pos"], d["vel"], d["pair_count"], d["wall_count"], d["virial"], d["wall_impulse"])
         sim.time = float(d["time"])
         sim.steps = int(d["steps"])
         return sim
