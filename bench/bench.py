@@ -1,0 +1,696 @@
+"""Benchmark of circles: throughput, the memory-bandwidth bound, the pymunk peer, work-precision.
+
+    python bench/bench.py [--quick] [--arch cpu|gpu] [--out outputs/bench]
+
+Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
+throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, peers.csv, work_precision.csv,
+results.md (every table, with the command and the date) and work_precision.png.
+
+What is measured, all in one run and one process:
+
+1. Throughput. Circles of one radius R at area fraction 0.3 in a 16:9 walled box, speeds
+   uniform in SPEED, default dt of each scheme; N from 1e3 up, both schemes, f32 and f64.
+   Each configuration: the first step (compilation and first touch) and a second step are
+   timed apart as warm-up; the second sets how many steps a repeat takes (about
+   `target` seconds, at least one); then `reps` repeats, reported as median, min and max.
+   Collisions per second count pair collisions over all repeats. The energy change and the
+   largest overlap after the repeats go with every speed figure.
+2. The bound. A Taichi kernel copies a large ndarray (dst[i] = src[i]); its best rate, bytes
+   read plus bytes written per second, is the machine's copy bandwidth B. The model of
+   bytes per circle-step is the state each step must at least read and write once:
+   pos and vel read and written, radius read: 9 numbers, 36 B in f32 and 72 B in f64, for
+   both schemes (grid arrays, neighbour reads, the event scheme's clocks and backups are
+   left out, so the bound is optimistic). Bound = B / bytes per circle-step.
+3. Peer. pymunk (see peer_pymunk.py) on the same scene, from the same start state, with
+   the discrete scheme's default dt; ratios circles / pymunk at equal N.
+4. Work-precision. N circles at area fractions 0.3 and 0.6 in a periodic square box, from
+   one start state; reference: event scheme, f64, default dt. For dt from 0.01 to 2 mean free
+   times (measured from the reference), `discrete` and `event` (f64) run the same simulated
+   time T; cost = wall seconds per unit of simulated time; errors against the reference:
+   pressure Z = 1 + virial / (2 T N kT) with kT = kinetic_energy / N, the pair collision
+   count, the energy (largest |E - E0| / E0 seen at NSEG checkpoints), and the largest
+   overlap at the checkpoints. pymunk has no periodic box: its rows use the same N and area
+   fraction in a walled box, against an event f64 reference of that walled scene; its Z is
+   the same pair-virial statistic (the walls' share of the pressure is left out of both).
+   pymunk is timed without callbacks and measured in a second, identical run with them.
+"""
+
+import argparse
+import csv
+import datetime
+import math
+import os
+import platform
+import re
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+import taichi as ti
+
+import circles
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import peer_pymunk  # noqa: E402
+
+#: Radius of every circle (world units); box sides follow from N and the area fraction.
+R = 0.5
+#: Speeds uniform in this range, directions uniform.
+SPEED = (0.5, 1.0)
+#: Box aspect W / H of the throughput scenes (the aspect of a 1920x1080 frame).
+ASPECT = 16.0 / 9.0
+AREA_FRACTION = 0.3
+#: Numbers per circle-step in the bandwidth model: pos and vel read and written, radius read.
+NUMBERS_PER_CIRCLE_STEP = 2 * 2 + 2 * 2 + 1
+BYTES = {"f32": 4, "f64": 8}
+#: Checkpoints per work-precision run (energy and overlap are sampled there).
+NSEG = 10
+SCHEMES = ("discrete", "event")
+PRECISIONS = ("f32", "f64")
+
+QUICK = dict(
+    sizes=(1_000, 10_000, 100_000), event_sizes=(1_000, 10_000, 100_000), reps=5, target=0.3,
+    peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000), render_reps=3,
+    copy_numbers=1 << 25, copy_reps=5,
+    wp_n=500, wp_duration_mft=10.0, wp_factors=(0.01, 0.04, 0.15, 0.5, 2.0))
+FULL = dict(
+    sizes=(1_000, 10_000, 100_000, 1_000_000), event_sizes=(1_000, 10_000, 100_000, 1_000_000), reps=5,
+    target=1.0, peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000, 3_000), render_reps=5,
+    copy_numbers=1 << 27, copy_reps=10,
+    wp_n=1500, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0))
+
+
+def now():
+    return time.perf_counter()
+
+
+def log(*args):
+    print(*args, flush=True)
+
+
+def slug(text):
+    text = re.sub(r"\((r|tm|c)\)", "", text.lower())
+    return re.sub(r"[^a-z0-9]+", "-", text).strip("-") or "unknown"
+
+
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def gpu_model():
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                             text=True, timeout=20)
+        if out.returncode == 0 and out.stdout.strip():
+            return out.stdout.strip().splitlines()[0]
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return "gpu"
+
+
+def engine_revision():
+    """The commit of the engine under test, marked when circles/ has uncommitted changes (read-only git calls)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                              timeout=20).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "circles"], cwd=root, capture_output=True,
+                               text=True, timeout=20).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (head or "unknown") + (" with uncommitted changes to circles/" if dirty else "")
+
+
+def box_for(n, fraction, aspect):
+    """(W, H) with W / H = aspect holding n circles of radius R at this area fraction."""
+    h = math.sqrt(n * math.pi * R * R / (fraction * aspect))
+    return (aspect * h, h)
+
+
+def spread(values):
+    return dict(median=statistics.median(values), min=min(values), max=max(values))
+
+
+# ------------------------------------------------------------------ bandwidth
+@ti.kernel
+def _copy(src: ti.types.ndarray(ndim=1), dst: ti.types.ndarray(ndim=1)):
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+def measure_bandwidth(numbers, reps):
+    """Copy bandwidth (bytes read + written per second) of a Taichi kernel on f32 ndarrays."""
+    src = ti.ndarray(ti.f32, shape=numbers)
+    dst = ti.ndarray(ti.f32, shape=numbers)
+    src.fill(1.0)
+    dst.fill(0.0)
+    _copy(src, dst)  # compile and first touch
+    ti.sync()
+    rates = []
+    for _ in range(reps):
+        t0 = now()
+        _copy(src, dst)
+        ti.sync()
+        rates.append(2 * 4 * numbers / (now() - t0))
+    # numpy's copy of the same size, as a check on the kernel.
+    a = np.ones(numbers, dtype=np.float32)
+    b = np.empty_like(a)
+    np.copyto(b, a)
+    np_rates = []
+    for _ in range(reps):
+        t0 = now()
+        np.copyto(b, a)
+        np_rates.append(2 * 4 * numbers / (now() - t0))
+    del src, dst, a, b
+    return [dict(method="taichi ndarray copy", mbytes=8 * numbers / 1e6, reps=reps, **_gb(rates)),
+            dict(method="numpy copyto (check)", mbytes=8 * numbers / 1e6, reps=reps, **_gb(np_rates))]
+
+
+def _gb(rates):
+    s = spread([r / 1e9 for r in rates])
+    return {"gbps_best": s["max"], "gbps_median": s["median"], "gbps_min": s["min"]}
+
+
+# ----------------------------------------------------------------- throughput
+def measure_throughput(n, scheme, precision, reps, target, bound_bw, max_steps=100_000):
+    box = box_for(n, AREA_FRACTION, ASPECT)
+    scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls", scheme=scheme,
+                          precision=precision, seed=0)
+    t0 = now()
+    sim = circles.Simulation(scene)
+    place_s = now() - t0
+    st0 = sim.stats()
+    t0 = now()
+    sim.step(1)
+    first_s = now() - t0
+    t0 = now()
+    sim.step(1)
+    second_s = now() - t0
+    k = int(max(1, min(max_steps, round(target / max(second_s, 1e-9)))))
+    st1 = sim.stats()
+    times = []
+    for _ in range(reps):
+        t0 = now()
+        sim.step(k)
+        times.append(now() - t0)
+    st2 = sim.stats()
+    steps_per_s = [k / t for t in times]
+    s = spread(steps_per_s)
+    pairs = st2["pair_collisions"] - st1["pair_collisions"]
+    walls = st2["wall_collisions"] - st1["wall_collisions"]
+    bytes_per = NUMBERS_PER_CIRCLE_STEP * BYTES[precision]
+    bound = bound_bw / bytes_per
+    row = dict(
+        n=n, scheme=scheme, precision=precision, dt=sim.dt, box_w=box[0], box_h=box[1], place_s=place_s,
+        warmup_first_step_s=first_s, warmup_second_step_s=second_s, steps_per_rep=k, reps=reps,
+        steps_per_s_median=s["median"], steps_per_s_min=s["min"], steps_per_s_max=s["max"],
+        circle_steps_per_s_median=n * s["median"], circle_steps_per_s_min=n * s["min"],
+        circle_steps_per_s_max=n * s["max"],
+        pair_collisions_per_s=pairs / sum(times), wall_collisions_per_s=walls / sum(times),
+        sim_time_per_wall_s=sim.dt * s["median"],
+        bytes_per_circle_step=bytes_per, bound_circle_steps_per_s=bound,
+        fraction_of_bound=n * s["median"] / bound,
+        energy_rel_change=abs(st2["kinetic_energy"] - st0["kinetic_energy"]) / st0["kinetic_energy"],
+        max_overlap=st2["max_overlap"], rounds_per_step=sim.rounds / max(sim.steps, 1))
+    return row, sim
+
+
+def measure_render(sim, reps, width=1920, height=1080):
+    t0 = now()
+    sim.render(width, height)
+    first = now() - t0
+    times = []
+    for _ in range(reps):
+        t0 = now()
+        sim.render(width, height)
+        times.append(now() - t0)
+    s = spread(times)
+    return dict(n=sim.n, width=width, height=height, first_s=first, reps=reps, frame_s_median=s["median"],
+                frame_s_min=s["min"], frame_s_max=s["max"])
+
+
+def measure_placement(n, fraction, reps, aspect=ASPECT):
+    box = box_for(n, fraction, aspect)
+    times = []
+    for _ in range(reps):
+        scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls", scheme="discrete",
+                              precision="f64", seed=0)
+        t0 = now()
+        sim = circles.Simulation(scene)
+        times.append(now() - t0)
+    s = spread(times)
+    return dict(n=n, area_fraction=fraction, method="random sequential addition"
+                if fraction <= 0.45 else "lattice melted by the event scheme",
+                reps=reps, place_s_median=s["median"], place_s_min=s["min"], place_s_max=s["max"],
+                max_overlap=sim.stats()["max_overlap"])
+
+
+# ----------------------------------------------------------------------- peer
+def start_state(n, fraction, aspect, boundary, seed=0):
+    box = box_for(n, fraction, aspect)
+    scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary=boundary, scheme="event",
+                          precision="f64", seed=seed)
+    s = circles.Simulation(scene).state()
+    return s.pos, s.vel, s.radius, s.mass, box
+
+
+def measure_pymunk(n, reps, target, dt):
+    pos, vel, radius, mass, box = start_state(n, AREA_FRACTION, ASPECT, "walls")
+    t0 = now()
+    gas = peer_pymunk.PymunkGas(pos, vel, radius, mass, box)
+    build_s = now() - t0
+    e0 = gas.kinetic_energy()
+    t0 = now()
+    gas.step(dt, 1)
+    first_s = now() - t0
+    t0 = now()
+    gas.step(dt, 1)
+    second_s = now() - t0
+    k = int(max(1, round(target / max(second_s, 1e-9))))
+    times = []
+    for _ in range(reps):
+        t0 = now()
+        gas.step(dt, k)
+        times.append(now() - t0)
+    s = spread([k / t for t in times])
+    return dict(peer="pymunk " + pymunk_version(), n=n, dt=dt, build_s=build_s, warmup_first_step_s=first_s,
+                steps_per_rep=k, reps=reps, steps_per_s_median=s["median"], steps_per_s_min=s["min"],
+                steps_per_s_max=s["max"], circle_steps_per_s_median=n * s["median"],
+                circle_steps_per_s_min=n * s["min"], circle_steps_per_s_max=n * s["max"],
+                sim_time_per_wall_s=dt * s["median"],
+                energy_rel_change=abs(gas.kinetic_energy() - e0) / e0, max_overlap=gas.max_overlap())
+
+
+def pymunk_version():
+    import pymunk
+    return pymunk.version
+
+
+# ------------------------------------------------------------ work-precision
+def run_circles(start, boundary, scheme, precision, dt, duration):
+    pos, vel, radius, mass, box = start
+    sim = circles.Simulation.from_arrays(pos, vel, radius, mass=mass, box=box, boundary=boundary, scheme=scheme,
+                                         precision=precision, dt=dt)
+    e0 = float(0.5 * np.sum(mass * (vel * vel).sum(axis=1)))
+    wall = 0.0
+    energy_err = overlap = 0.0
+    seg_rate, seg_z = [], []
+    last = dict(pair_collisions=0, virial=0.0)
+    for _ in range(NSEG):
+        t0 = now()
+        sim.advance(duration / NSEG)
+        wall += now() - t0
+        st = sim.stats()
+        energy_err = max(energy_err, abs(st["kinetic_energy"] - e0) / e0)
+        overlap = max(overlap, st["max_overlap"])
+        seg_rate.append((st["pair_collisions"] - last["pair_collisions"]) / (duration / NSEG))
+        seg_z.append(1.0 + (st["virial"] - last["virial"]) / (2.0 * (duration / NSEG) * st["kinetic_energy"]))
+        last = st
+    return dict(dt=sim.dt, duration=duration, wall_s=wall, pair_collisions=st["pair_collisions"],
+                virial=st["virial"], kinetic_energy=st["kinetic_energy"], energy_error=energy_err,
+                max_overlap=overlap, steps=sim.steps, collision_floor=_standard_error(seg_rate),
+                pressure_floor=_standard_error(seg_z))
+
+
+def _standard_error(values):
+    """Relative standard error of the mean of per-segment values: the statistical floor of a run this long."""
+    values = np.asarray(values, dtype=np.float64)
+    if len(values) < 2 or values.mean() == 0:
+        return float("nan")
+    return float(values.std(ddof=1) / math.sqrt(len(values)) / abs(values.mean()))
+
+
+def run_pymunk(start, dt, duration):
+    pos, vel, radius, mass, box = start
+    steps = max(NSEG, int(round(duration / dt)))
+    per_seg = [steps // NSEG + (1 if i < steps % NSEG else 0) for i in range(NSEG)]
+    timed = peer_pymunk.PymunkGas(pos, vel, radius, mass, box)
+    t0 = now()
+    timed.step(dt, steps)
+    wall = now() - t0
+    final_timed = timed.positions()
+    gas = peer_pymunk.PymunkGas(pos, vel, radius, mass, box, observe=True)
+    e0 = gas.kinetic_energy()
+    energy_err = overlap = 0.0
+    for k in per_seg:
+        gas.step(dt, k)
+        energy_err = max(energy_err, abs(gas.kinetic_energy() - e0) / e0)
+        overlap = max(overlap, gas.max_overlap())
+    same = bool(np.array_equal(final_timed, gas.positions()))
+    return dict(dt=dt, duration=steps * dt, wall_s=wall, pair_collisions=gas.pair_collisions, virial=gas.virial,
+                kinetic_energy=gas.kinetic_energy(), energy_error=energy_err, max_overlap=overlap, steps=steps,
+                note="" if same else "timed and observed runs differ")
+
+
+def compressibility(run, n):
+    # Z = 1 + virial / (2 T N kT), kT = E / N.
+    return 1.0 + run["virial"] / (2.0 * run["duration"] * run["kinetic_energy"])
+
+
+def work_precision(cfg):
+    n = cfg["wp_n"]
+    rows = []
+    for fraction in (0.3, 0.6):
+        for boundary, runners in (("periodic", ("discrete", "event")), ("walls", ("pymunk",))):
+            log(f"  work-precision: area fraction {fraction}, {boundary}: start state")
+            start = start_state(n, fraction, 1.0, boundary, seed=1)
+            # Warm the kernels of this boundary before anything is timed.
+            for scheme in SCHEMES:
+                run_circles(start, boundary, scheme, "f64", None, 1e-3)
+            # Mean free time from a short reference run, then the reference over the full span.
+            pilot = run_circles(start, boundary, "event", "f64", None, 2.0)
+            mft = pilot["duration"] * n / max(2 * pilot["pair_collisions"], 1)
+            duration = cfg["wp_duration_mft"] * mft
+            ref = run_circles(start, boundary, "event", "f64", None, duration)
+            mft = ref["duration"] * n / max(2 * ref["pair_collisions"], 1)
+            z_ref = compressibility(ref, n)
+            log(f"    mean free time {mft:.4g}, T = {duration:.4g}, reference: {ref['pair_collisions']} collisions, "
+                f"Z = {z_ref:.4f}, {ref['wall_s']:.2f} s; statistical floor: Z {ref['pressure_floor']:.2g}, "
+                f"collision rate {ref['collision_floor']:.2g}")
+
+            def row(method, precision, factor, run):
+                z = compressibility(run, n)
+                rate = run["pair_collisions"] / run["duration"]
+                ref_rate = ref["pair_collisions"] / ref["duration"]
+                return dict(area_fraction=fraction, boundary=boundary, n=n, method=method, precision=precision,
+                            dt_over_mft=factor, dt=run["dt"], mean_free_time=mft, duration=run["duration"],
+                            steps=run["steps"], wall_s=run["wall_s"], cost_s_per_time=run["wall_s"] / run["duration"],
+                            z=z, z_ref=z_ref, pressure_error=abs(z - z_ref) / z_ref,
+                            collisions=run["pair_collisions"], collision_error=abs(rate - ref_rate) / ref_rate,
+                            energy_error=run["energy_error"], max_overlap=run["max_overlap"],
+                            pressure_floor=ref["pressure_floor"], collision_floor=ref["collision_floor"],
+                            note=run.get("note", ""))
+
+            rows.append(row("reference (event)", "f64", ref["dt"] / mft, ref))
+            for method in runners:
+                for factor in cfg["wp_factors"]:
+                    dt = factor * mft
+                    if method == "pymunk":
+                        run = run_pymunk(start, dt, duration)
+                        rows.append(row("pymunk", "f64", factor, run))
+                    else:
+                        run = run_circles(start, boundary, method, "f64", dt, duration)
+                        rows.append(row(method, "f64", factor, run))
+                    r = rows[-1]
+                    log(f"    {method:8s} dt = {factor:5.2f} mft: {r['cost_s_per_time']:.3g} s per time unit, "
+                        f"Z error {r['pressure_error']:.2g}, collisions {r['collision_error']:.2g}, "
+                        f"energy {r['energy_error']:.2g}, overlap {r['max_overlap']:.2g}")
+    return rows
+
+
+# ------------------------------------------------------------------- output
+def write_csv(path, rows):
+    if not rows:
+        return
+    keys = list(rows[0].keys())
+    for r in rows[1:]:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: _fmt(v) for k, v in r.items()})
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return v
+
+
+def g(v, digits=3):
+    if v is None or v == "":
+        return ""
+    if isinstance(v, float):
+        if v == 0:
+            return "0"
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def md_table(headers, rows):
+    out = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    out += ["| " + " | ".join(g(c) if not isinstance(c, str) else c for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def plot_work_precision(rows, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    measures = (("pressure_error", "pressure Z, relative error"), ("collision_error", "collision rate, relative error"),
+                ("energy_error", "energy, largest relative change"), ("max_overlap", "largest overlap / contact"))
+    fractions = sorted({r["area_fraction"] for r in rows})
+    style = {"discrete": ("tab:orange", "o"), "event": ("tab:blue", "s"), "pymunk": ("tab:green", "^")}
+    floor = 1e-17
+    fig, axes = plt.subplots(len(fractions), len(measures), figsize=(4.2 * len(measures), 3.8 * len(fractions)),
+                             squeeze=False)
+    for i, fr in enumerate(fractions):
+        for j, (key, label) in enumerate(measures):
+            ax = axes[i][j]
+            for method, (color, marker) in style.items():
+                pts = sorted((r["dt_over_mft"], max(r[key], floor), r["cost_s_per_time"]) for r in rows
+                             if r["area_fraction"] == fr and r["method"] == method)
+                if not pts:
+                    continue
+                ax.loglog([p[1] for p in pts], [p[2] for p in pts], marker=marker, color=color, label=method)
+                for f, x, y in (pts[0], pts[-1]):
+                    ax.annotate(f"{f:g}", (x, y), textcoords="offset points", xytext=(4, 2), fontsize=7,
+                                color=color)
+            for r in rows:
+                if r["area_fraction"] == fr and r["method"].startswith("reference") and r["boundary"] == "periodic":
+                    ax.axhline(r["cost_s_per_time"], color="gray", lw=0.8, ls="--", label="reference cost")
+                    floor_key = {"pressure_error": "pressure_floor", "collision_error": "collision_floor"}.get(key)
+                    if floor_key and math.isfinite(r[floor_key]):
+                        ax.axvline(r[floor_key], color="gray", lw=0.8, ls=":", label="statistical floor")
+            ax.set_xlabel(label)
+            if j == 0:
+                ax.set_ylabel(f"phi = {fr}: wall s per unit time")
+            ax.grid(True, which="both", lw=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle(f"work-precision, N = {rows[0]['n']} (labels: dt / mean free time; values below 1e-17 at 1e-17)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios, wp, errors):
+    lines = [f"# circles benchmark: {meta['machine_name']}", "",
+             f"Command: `{meta['command']}`  ", f"Date: {meta['date']}  ", f"Engine: {meta['revision']}  ",
+             f"Machine: {meta['machine_name']}, {meta['cores']} cores; arch {meta['arch']}; taichi {meta['taichi']}, "
+             f"pymunk {meta['pymunk']}, numpy {np.__version__}, Python {platform.python_version()}  ",
+             f"Wall time of the whole run: {meta['wall_s']:.0f} s. Timings are noisy (a shared machine): "
+             "medians with min and max over repeats.", "",
+             "Scene of the throughput and peer rows: circles of radius "
+             f"{R} at area fraction {AREA_FRACTION} in a 16:9 walled box, speeds uniform in {SPEED}, "
+             "mass = radius, default dt (event: the fastest circle moves 0.3 radii per step; discrete: 0.2 radii).", ""]
+    lines += ["## Memory copy bandwidth", "",
+              md_table(["method", "MB moved", "best GB/s", "median GB/s", "min GB/s"],
+                       [[b["method"], b["mbytes"], b["gbps_best"], b["gbps_median"], b["gbps_min"]] for b in bandwidth]),
+              "", f"Bound model: {NUMBERS_PER_CIRCLE_STEP} numbers per circle-step (pos and vel read and written, "
+              "radius read): 36 B in f32, 72 B in f64, both schemes; grid, neighbour reads and the event scheme's "
+              "extra arrays are not counted, so the bound is optimistic. Bound = best taichi copy bandwidth / bytes.", ""]
+    lines += ["## Compilation", "",
+              "First Simulation and 2 steps of N = 200 per scheme and precision, before anything else is timed: "
+              "this is Taichi's compilation (or loading from its offline cache, when an earlier run compiled "
+              "the same kernels). Every row below also reports its own first and second step apart.", "",
+              md_table(["scheme", "prec", "first run s"],
+                       [[c["scheme"], c["precision"], c["first_run_s"]] for c in compile_rows]), ""]
+    lines += ["## Throughput", "",
+              md_table(["N", "scheme", "prec", "dt", "warm-up 1st / 2nd step s", "steps/rep", "steps/s median [min, max]",
+                        "circle-steps/s", "pair coll./s", "sim time / wall s", "of bound", "energy change",
+                        "max overlap"],
+                       [[t["n"], t["scheme"], t["precision"], t["dt"],
+                         f"{g(t['warmup_first_step_s'])} / {g(t['warmup_second_step_s'])}", t["steps_per_rep"],
+                         f"{g(t['steps_per_s_median'])} [{g(t['steps_per_s_min'])}, {g(t['steps_per_s_max'])}]",
+                         t["circle_steps_per_s_median"], t["pair_collisions_per_s"], t["sim_time_per_wall_s"],
+                         t["fraction_of_bound"], t["energy_rel_change"], t["max_overlap"]] for t in throughput]), ""]
+    lines += ["## Placement", "",
+              md_table(["N", "area fraction", "method", "reps", "s median [min, max]"],
+                       [[p["n"], p["area_fraction"], p["method"], p["reps"],
+                         f"{g(p['place_s_median'])} [{g(p['place_s_min'])}, {g(p['place_s_max'])}]"]
+                        for p in placement]), ""]
+    lines += ["## Render, 1920x1080 frame", "",
+              md_table(["N", "first call s (compile)", "s per frame median [min, max]"],
+                       [[r["n"], r["first_s"], f"{g(r['frame_s_median'])} [{g(r['frame_s_min'])}, {g(r['frame_s_max'])}]"]
+                        for r in render]), ""]
+    lines += ["## Peer: pymunk (Chipmunk2D, one thread) on the same scene and dt as `discrete`", "",
+              md_table(["N", "dt", "steps/s median [min, max]", "circle-steps/s", "sim time / wall s",
+                        "energy change", "max overlap"],
+                       [[p["n"], p["dt"], f"{g(p['steps_per_s_median'])} [{g(p['steps_per_s_min'])}, "
+                         f"{g(p['steps_per_s_max'])}]", p["circle_steps_per_s_median"], p["sim_time_per_wall_s"],
+                         p["energy_rel_change"], p["max_overlap"]] for p in peers]), "",
+              "Ratios circles / pymunk at equal N (above 1: circles is faster). circle-steps: per step of its own "
+              "dt; sim time: simulated time per wall second (the event scheme takes 1.5x longer steps).", "",
+              md_table(["N", "scheme", "prec", "circle-steps ratio", "sim-time ratio"],
+                       [[r["n"], r["scheme"], r["precision"], r["circle_steps_ratio"], r["sim_time_ratio"]]
+                        for r in ratios]), ""]
+    if wp:
+        n = wp[0]["n"]
+        lines += ["## Work-precision", "",
+                  f"N = {n}; discrete and event in a periodic square box against an event f64 reference at its "
+                  "default dt; pymunk in a walled square box (it has no periodic one) against the event f64 "
+                  "reference of that walled scene. Cost: wall seconds per unit of simulated time. Errors: "
+                  "pressure Z (pair virial), collision rate, largest energy change, largest overlap at "
+                  f"{NSEG} checkpoints. The motion is chaotic: a run whose collisions differ from the reference's "
+                  "soon follows another trajectory with the same statistics, so its Z and collision errors "
+                  "cannot be resolved below the statistical floor of a run this long (the relative standard "
+                  f"error of the reference's mean over its {NSEG} segments, the dotted line in the plot and the "
+                  "`floor` columns). The event rows at other dt follow the reference's own collisions, so "
+                  "their differences are round-off.", "", "![work-precision](work_precision.png)", "",
+                  md_table(["phi", "box", "method", "dt / mft", "steps", "s per time", "Z", "Z error",
+                            "Z floor", "collision error", "collision floor", "energy error", "max overlap"],
+                           [[w["area_fraction"], w["boundary"], w["method"], w["dt_over_mft"], w["steps"],
+                             w["cost_s_per_time"], w["z"], w["pressure_error"], w["pressure_floor"],
+                             w["collision_error"], w["collision_floor"], w["energy_error"], w["max_overlap"]]
+                            for w in wp]), ""]
+    if errors:
+        lines += ["## Failures", ""] + [f"- {e}" for e in errors] + [""]
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+
+
+# ---------------------------------------------------------------------- main
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, a few minutes on a 2-core CPU")
+    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
+    ap.add_argument("--out", default="outputs/bench")
+    ap.add_argument("--skip", default="", help="comma list of sections to skip: throughput,peers,placement,wp")
+    args = ap.parse_args(argv)
+    cfg = QUICK if args.quick else FULL
+    skip = set(filter(None, args.skip.split(",")))
+    start = now()
+    arch = circles.init(arch=args.arch)
+    machine_name = cpu_model() if arch == "cpu" else gpu_model()
+    outdir = os.path.join(args.out, slug(machine_name))
+    os.makedirs(outdir, exist_ok=True)
+    errors = []
+    log(f"circles benchmark on {machine_name} ({arch}), writing {outdir}")
+
+    def guarded(what, fn, *a, **kw):
+        try:
+            return fn(*a, **kw)
+        except Exception as e:  # a failure is a result: record it and go on
+            msg = f"{what}: {type(e).__name__}: {' '.join(str(e).split())[:300]}"
+            log("  FAILED " + msg)
+            errors.append(msg)
+            return None
+
+    log("bandwidth")
+    bandwidth = measure_bandwidth(cfg["copy_numbers"], cfg["copy_reps"])
+    bw = bandwidth[0]["gbps_best"] * 1e9
+    log(f"  taichi copy {bandwidth[0]['gbps_best']:.2f} GB/s best, numpy {bandwidth[1]['gbps_best']:.2f} GB/s")
+
+    # Compile the placement and step kernels on a small scene first, so that the first row does
+    # not carry every compilation.
+    # Taichi keeps compiled kernels in its offline cache between runs, so this depends on what ran before.
+    compile_rows = []
+    for scheme in SCHEMES:
+        for precision in PRECISIONS:
+            t0 = now()
+            ok = guarded("warm-up", lambda: circles.Simulation(circles.Scene(
+                n=200, box=box_for(200, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme,
+                precision=precision)).step(2))
+            compile_rows.append(dict(scheme=scheme, precision=precision, n=200, steps=2,
+                                     first_run_s=now() - t0, ok=ok is not None))
+    log("  first runs (compilation): " + ", ".join(f"{c['scheme']} {c['precision']} {c['first_run_s']:.2f} s"
+                                                  for c in compile_rows))
+
+    throughput, render, placement = [], [], []
+    if "throughput" not in skip:
+        log("throughput")
+        for n in cfg["sizes"]:
+            for scheme in SCHEMES:
+                if scheme == "event" and n not in cfg["event_sizes"]:
+                    continue
+                for precision in PRECISIONS:
+                    res = guarded(f"throughput N={n} {scheme} {precision}", measure_throughput, n, scheme,
+                                  precision, cfg["reps"], cfg["target"], bw)
+                    if res is None:
+                        continue
+                    row, sim = res
+                    throughput.append(row)
+                    log(f"  N={n:>8} {scheme:8s} {precision}: {row['circle_steps_per_s_median']:.3g} circle-steps/s "
+                        f"[{row['circle_steps_per_s_min']:.3g}, {row['circle_steps_per_s_max']:.3g}], "
+                        f"{row['fraction_of_bound']:.2g} of bound, warm-up {row['warmup_first_step_s']:.2f} s, "
+                        f"placement {row['place_s']:.2f} s")
+                    if scheme == "discrete" and precision == "f32":
+                        r = guarded(f"render N={n}", measure_render, sim, cfg["render_reps"])
+                        if r:
+                            render.append(r)
+                            log(f"  render N={n}: {r['frame_s_median']:.3g} s per 1920x1080 frame")
+                    del sim
+        # Placement at 0.3: every throughput row built its scene (same seed, so the same placement).
+        for n in cfg["sizes"]:
+            ts = [t["place_s"] for t in throughput if t["n"] == n]
+            if ts:
+                s = spread(ts)
+                placement.append(dict(n=n, area_fraction=AREA_FRACTION, method="random sequential addition",
+                                      reps=len(ts), place_s_median=s["median"], place_s_min=s["min"],
+                                      place_s_max=s["max"], max_overlap=""))
+    if "placement" not in skip:
+        log("placement at area fraction 0.8")
+        for n in cfg["dense_sizes"]:
+            p = guarded(f"placement N={n} fraction 0.8", measure_placement, n, 0.8, 1 if n > 1000 else 2)
+            if p:
+                placement.append(p)
+                log(f"  N={n}: {p['place_s_median']:.3g} s")
+
+    peers, ratios = [], []
+    if "peers" not in skip:
+        log("peer: pymunk")
+        for n in cfg["peer_sizes"]:
+            dt = next((t["dt"] for t in throughput if t["n"] == n and t["scheme"] == "discrete"), None)
+            if dt is None:
+                dt = 0.2 * R / SPEED[1]
+            p = guarded(f"pymunk N={n}", measure_pymunk, n, cfg["reps"], cfg["target"], dt)
+            if p is None:
+                continue
+            peers.append(p)
+            log(f"  N={n:>8} pymunk: {p['circle_steps_per_s_median']:.3g} circle-steps/s, energy change "
+                f"{p['energy_rel_change']:.2g}, overlap {p['max_overlap']:.2g}")
+            for t in throughput:
+                if t["n"] == n:
+                    ratios.append(dict(n=n, scheme=t["scheme"], precision=t["precision"],
+                                       circle_steps_ratio=t["circle_steps_per_s_median"] / p["circle_steps_per_s_median"],
+                                       sim_time_ratio=t["sim_time_per_wall_s"] / p["sim_time_per_wall_s"]))
+
+    wp = []
+    if "wp" not in skip:
+        log("work-precision")
+        wp = guarded("work-precision", work_precision, cfg) or []
+
+    version = ti.__version__
+    meta = dict(machine_name=machine_name, cores=os.cpu_count(), arch=arch,
+                taichi=".".join(map(str, version)) if isinstance(version, tuple) else str(version),
+                pymunk=pymunk_version(), revision=engine_revision(), command="python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:]),
+                date=datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"), wall_s=now() - start)
+    write_csv(os.path.join(outdir, "bandwidth.csv"), bandwidth)
+    write_csv(os.path.join(outdir, "throughput.csv"), throughput)
+    write_csv(os.path.join(outdir, "placement.csv"), placement)
+    write_csv(os.path.join(outdir, "render.csv"), render)
+    write_csv(os.path.join(outdir, "compile.csv"), compile_rows)
+    write_csv(os.path.join(outdir, "peers.csv"), peers + [dict(peer="ratio circles/pymunk", **r) for r in ratios])
+    write_csv(os.path.join(outdir, "work_precision.csv"), wp)
+    if wp:
+        guarded("plot", plot_work_precision, wp, os.path.join(outdir, "work_precision.png"))
+    write_markdown(os.path.join(outdir, "results.md"), meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios,
+                   wp, errors)
+    log(f"done in {now() - start:.0f} s: {outdir}")
+    return 1 if errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
