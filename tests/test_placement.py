@@ -90,7 +90,8 @@ def test_placement_is_spread_over_the_box(circles_cpu):
     assert np.all(np.abs(counts - expected) <= 5 * sd + 0.02 * expected)
 
 
-@pytest.mark.parametrize("mass, expect", [("area", lambda r: r * r), ("equal", lambda r: np.ones_like(r))])
+@pytest.mark.parametrize("mass, expect", [("area", lambda r: r * r), ("equal", lambda r: np.ones_like(r))],
+                         ids=["area", "equal"])
 def test_mass_models(circles_cpu, mass, expect):
     """'area': m proportional to r^2; 'equal': all masses the same."""
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=300, box=(1.0, 1.0), radius=(0.01, 0.03),

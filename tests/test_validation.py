@@ -49,7 +49,8 @@ def test_n_not_positive(circles_cpu, n):
 
 
 @pytest.mark.parametrize("radius, shown", [(0.0, ZERO), (-0.01, number(-0.01)),
-                                           ((-0.01, 0.02), number(-0.01)), ((0.0, 0.02), ZERO)])
+                                           ((-0.01, 0.02), number(-0.01)), ((0.0, 0.02), ZERO)],
+                         ids=["zero", "negative", "range_negative", "range_zero"])
 def test_radius_not_positive(circles_cpu, radius, shown):
     refused(scene(circles_cpu, radius=radius), shown, ZERO)
 
@@ -60,7 +61,8 @@ def test_radius_larger_than_box(circles_cpu, boundary):
     refused(scene(circles_cpu, n=1, radius=0.6, boundary=boundary), r"0\.6|1\.2", number(1))
 
 
-@pytest.mark.parametrize("box, shown", [((0.0, 1.0), ZERO), ((2.0, -1.0), number(-1))])
+@pytest.mark.parametrize("box, shown", [((0.0, 1.0), ZERO), ((2.0, -1.0), number(-1))],
+                         ids=["zero_width", "negative_height"])
 def test_box_side_not_positive(circles_cpu, box, shown):
     refused(scene(circles_cpu, box=box), shown, ZERO)
 
@@ -72,7 +74,7 @@ def test_box_side_not_positive(circles_cpu, box, shown):
     ("speed", (0.5, float("nan"))),
     ("dt", float("nan")),
     ("dt", float("inf")),
-])
+], ids=["radius_nan", "rmax_inf", "box_inf", "vmax_nan", "dt_nan", "dt_inf"])
 def test_non_finite_numbers(circles_cpu, field, value):
     refused(scene(circles_cpu, **{field: value}), r"(?i)nan|inf")
 
@@ -91,12 +93,12 @@ def test_unknown_arch(circles_cpu):
     refused(lambda: circles_cpu.init(arch="tpu"), "tpu", "cpu")
 
 
-@pytest.mark.parametrize("dt, shown", [(0.0, ZERO), (-0.5, number(-0.5))])
+@pytest.mark.parametrize("dt, shown", [(0.0, ZERO), (-0.5, number(-0.5))], ids=["zero", "negative"])
 def test_dt_not_positive(circles_cpu, dt, shown):
     refused(scene(circles_cpu, dt=dt), shown, ZERO)
 
 
-@pytest.mark.parametrize("n, radius, fraction", [
+@pytest.mark.parametrize("n, radius, fraction", ids=["equal", "mixed"], argvalues=[
     (121, 0.05, 121 * math.pi * 0.05**2),                         # equal radii: 0.9503
     (120, (0.04, 0.06), 120 * math.pi * (0.04**2 + 0.04 * 0.06 + 0.06**2) / 3),  # 0.9550
 ])
