@@ -5,6 +5,11 @@ A scene comes from a TOML file (the Scene fields at top level, and a ``[run]`` t
 flags override the file. Without a file the scene is the showcase below, which flags
 change in the same way; ``circles`` with no arguments at all runs the showcase.
 
+A file may instead list its circles one by one (``[[circle]]`` tables, see
+`circles.scenefile`); it is simulated with ``Simulation.from_arrays``. Then --box,
+--boundary, --scheme, --precision, --dt and --mass (the model for circles without a mass)
+still override the file, and --n, --radius, --speed and --seed are refused.
+
 Frames are taken every 1/fps of simulated time, starting with the state at t = 0, so a run
 of ``duration`` seconds gives ``ceil(duration * fps)`` frames showing t = 0, 1/fps, ...,
 and the video lasts ``duration`` seconds and shows the same motion on every machine. The
@@ -66,8 +71,8 @@ def _build_parser():
         description="Simulate a scene (the showcase, or SCENE.toml) and write its frames. "
                     "Flags override the scene file.")
     run.add_argument("scene", nargs="?", metavar="SCENE.toml",
-                     help="scene file: Scene fields at top level, a [run] table for the "
-                          "run options")
+                     help="scene file: Scene fields (or [[circle]] tables listing the "
+                          "circles) at top level, a [run] table for the run options")
     scene = run.add_argument_group("scene")
     scene.add_argument("--n", type=int, help="number of circles")
     scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
@@ -187,8 +192,30 @@ def frame_times(duration, fps):
     return [k / fps for k in range(count)]
 
 
+#: Flags that shape a random scene only: refused with a file that lists its circles.
+RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed")
+
+
+def _circle_list(path, fields, args):
+    """The circles of a scene file with [[circle]] entries, flags applied and checked."""
+    from .scenefile import circle_list_from_dict
+
+    for key in RANDOM_SCENE_FLAGS:
+        if getattr(args, key) is not None:
+            raise UsageError(f"argument --{key} does not apply to {path}: it lists its circles "
+                             "([[circle]] entries), and --n, --radius, --speed and --seed only "
+                             "shape random scenes: drop the flag or edit the file")
+    try:
+        return circle_list_from_dict({**fields, **_scene_overrides(args)})
+    except (ValueError, TypeError) as error:
+        raise UsageError(f"{path}: {error}") from None
+
+
 def _prepare(argv):
-    """Everything that can fail on bad input, before any simulating: (scene, options)."""
+    """Everything that can fail on bad input, before any simulating: (scene, options).
+
+    The scene is a `Scene`, or a `CircleList` for a file that lists its circles.
+    """
     parser = _build_parser()
     if not argv:
         argv = ["run"]
@@ -197,15 +224,19 @@ def _prepare(argv):
         raise UsageError("give a command: circles run [SCENE.toml] [flags] "
                          "(see circles run --help)")
     from .scene import Scene
+    from .scenefile import lists_circles
     from .video import check_writable
 
     fields, file_run = (_read_scene_file(args.scene) if args.scene
                         else (dict(SHOWCASE_SCENE), {}))
-    try:
-        scene = Scene.from_dict({**fields, **_scene_overrides(args)})
-    except (ValueError, TypeError) as error:
-        where = f"{args.scene}: " if args.scene else ""
-        raise UsageError(f"{where}{error}") from None
+    if args.scene and lists_circles(fields):
+        scene = _circle_list(args.scene, fields, args)
+    else:
+        try:
+            scene = Scene.from_dict({**fields, **_scene_overrides(args)})
+        except (ValueError, TypeError) as error:
+            where = f"{args.scene}: " if args.scene else ""
+            raise UsageError(f"{where}{error}") from None
     options = _run_options(file_run, args)
     try:
         options["out"] = check_writable(options["out"], options["fps"])
@@ -227,6 +258,18 @@ class _StopRequest:
         sys.stderr.write("\nstopping after this frame (Ctrl-C again to stop at once)\n")
 
 
+def _simulation(scene):
+    """A Simulation of a `Scene` (random placement) or of a `CircleList` (given circles)."""
+    import circles
+
+    if isinstance(scene, circles.Scene):
+        return circles.Simulation(scene)
+    return circles.Simulation.from_arrays(
+        scene.pos, scene.vel, scene.radius, mass=scene.mass, box=scene.box,
+        boundary=scene.boundary, scheme=scene.scheme, precision=scene.precision, dt=scene.dt,
+        color=scene.color)
+
+
 def _run(scene, options):
     from tqdm import tqdm
 
@@ -237,8 +280,9 @@ def _run(scene, options):
     started = time.perf_counter()
     try:
         arch = circles.init(options["arch"])
-        # Placement can still refuse a scene that passed the checks of Scene.
-        sim = circles.Simulation(scene)
+        # Placement can still refuse a scene that passed the checks of Scene, and
+        # from_arrays checks what a CircleList leaves to it (such as the area fraction).
+        sim = _simulation(scene)
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
     setup_s = time.perf_counter() - started
@@ -247,7 +291,7 @@ def _run(scene, options):
     stats_s = time.perf_counter() - tick
     width, height = options["size"]
     times = frame_times(options["duration"], options["fps"])
-    periodic = scene.boundary == "periodic"
+    periodic = sim.boundary == "periodic"
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
     writer = FrameWriter(options["out"], options["fps"])
@@ -278,7 +322,7 @@ def _run(scene, options):
             sim.advance(end - sim.time)
             clock["simulate"] += time.perf_counter() - tick
             bar.update(1)
-            rate = scene.n * sim.steps / max(clock["simulate"], 1e-9)
+            rate = sim.n * sim.steps / max(clock["simulate"], 1e-9)
             bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
                                 f"{rate:.3g} circle-steps/s", refresh=False)
             if stop.requested:
@@ -296,19 +340,18 @@ def _run(scene, options):
     stats = sim.stats()
     stats_s += time.perf_counter() - tick
     wall_s = time.perf_counter() - started
-    _summary(sim, scene, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
+    _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
              interrupted)
     return EXIT_INTERRUPTED if interrupted else 0
 
 
-def _summary(sim, scene, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
+def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
              interrupted):
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
-    rate = scene.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
+    rate = sim.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
     lines = [
-        ("circles", f"{scene.n} ({scene.scheme}, {scene.precision}, {scene.boundary}, "
-                    f"{arch})"),
+        ("circles", f"{sim.n} ({sim.scheme}, {sim.precision}, {sim.boundary}, {arch})"),
         ("simulated", f"{sim.time:.6g} s in {sim.steps} steps of dt <= {sim.dt:.3g} s"
                       + (" (stopped by Ctrl-C)" if interrupted else "")),
         ("wall time", f"{wall_s:.1f} s: placement {setup_s:.1f}, simulation "

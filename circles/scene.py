@@ -153,6 +153,10 @@ class Scene:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Scene":
+        if "circle" in d:
+            raise ValueError("the scene lists its circles ([[circle]] entries), which a random Scene "
+                             "cannot hold: read it with circles.scenefile.read_circle_list and "
+                             "simulate it with circles.Simulation.from_arrays")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -165,7 +169,11 @@ class Scene:
 
     @classmethod
     def from_toml(cls, path) -> "Scene":
-        """Read a scene from TOML: the Scene fields at top level; a [run] table (for the command line) is ignored."""
+        """Read a scene from TOML: the Scene fields at top level; a [run] table (for the command line) is ignored.
+
+        A file that lists its circles ([[circle]] entries) is refused with a ValueError: read it
+        with `circles.scenefile.read_circle_list`.
+        """
         with open(path, "rb") as f:
             try:
                 d = tomllib.load(f)

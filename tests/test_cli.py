@@ -12,8 +12,10 @@ import time
 from pathlib import Path
 
 import imageio.v3 as iio
+import numpy as np
 import pytest
 
+import circles
 from circles import cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -141,3 +143,107 @@ def test_frame_times_start_at_zero_and_stop_before_the_end():
     assert cli.frame_times(0.5, 10) == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
     assert len(cli.frame_times(5.0, 30)) == 150
     assert len(cli.frame_times(1.05, 30)) == 32  # a last, partial interval gets a frame
+
+
+# ---- scene files that list their circles ([[circle]] tables) -------------------------
+CRADLE = ROOT / "scenes" / "newtons_cradle.toml"
+TWO_CIRCLES = ('box = [4.0, 3.0]\n'
+               '[[circle]]\npos = [1.0, 1.5]\nvel = [1.0, 0.0]\nradius = 0.2\n'
+               '[[circle]]\npos = [3.0, 1.5]\nvel = [0.0, 0.0]\nradius = 0.2\n')
+
+
+def test_newtons_cradle_file_runs_end_to_end(tmp_path):
+    """The cradle's hit is at t = 1: a run to t = 1.5 has the five collisions of one hit."""
+    result = run_cli(["run", str(CRADLE), "--duration", "1.5", "--fps", "10",
+                      "--size", "64x36", "--arch", "cpu", "--out", "cradle.gif"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    gif = iio.imread(tmp_path / "cradle.gif", index=None)
+    assert gif.shape[:3] == (15, 36, 64)
+    assert "6 (event, f64, walls" in result.stdout
+    assert "collisions  5 pair, 0 wall" in result.stdout
+
+
+def test_read_circle_list_gives_an_exact_newtons_cradle(circles_cpu):
+    """The cradle file read and simulated with from_arrays: the incoming circle (0) hits the
+    row (1 to 5) at t = 1; at t = 2.5, before the last circle reaches the wall, only the
+    last one moves, with exactly the incoming velocity, and the others rest."""
+    from circles.scenefile import read_circle_list
+
+    c = read_circle_list(CRADLE)
+    assert c.n == 6 and c.box == (16.0, 9.0) and c.boundary == "walls"
+    assert c.scheme == "event" and c.precision == "f64" and c.dt is None
+    assert c.mass.tolist() == c.radius.tolist()  # mass model "radius"
+    incoming = c.vel[0].copy()
+    assert incoming.tolist() == [3.0, 0.0] and not c.vel[1:].any()
+    sim = circles_cpu.Simulation.from_arrays(
+        c.pos, c.vel, c.radius, mass=c.mass, box=c.box, boundary=c.boundary, scheme=c.scheme,
+        precision=c.precision, dt=c.dt, color=c.color)
+    sim.advance(2.5)
+    s = sim.state()
+    assert np.max(np.abs(s.vel[5] - incoming)) <= 1e-12
+    assert np.max(np.abs(s.vel[:5])) <= 1e-12
+    assert np.max(np.abs(s.pos[:, 0] - [5.0, 6.0, 7.0, 8.0, 9.0, 14.5])) <= 1e-12
+    assert sim.stats()["pair_collisions"] == 5
+    assert s.color[0].tolist() == [230, 80, 60]
+
+
+@pytest.mark.parametrize("flag, value", [("--n", "10"), ("--radius", "0.1"),
+                                         ("--speed", "1"), ("--seed", "3")])
+def test_circle_file_refuses_random_scene_flags(flag, value, capsys):
+    assert cli.main(["run", str(CRADLE), flag, value]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert captured.out == "" and len(lines) == 1, captured.err
+    assert flag in lines[0] and "newtons_cradle.toml" in lines[0] and "[[circle]]" in lines[0]
+
+
+@pytest.mark.parametrize("entry, words", [
+    ('pos = [2.8, 1.6]\nvel = [0.0, 0.0]\nradius = 0.2', ["circle 1", "circle 2", "overlap"]),
+    ('vel = [0.0, 0.0]\nradius = 0.2', ["circle 2", "pos", "missing", "[x, y]"]),
+    ('pos = [2.0]\nvel = [0.0, 0.0]\nradius = 0.2', ["circle 2", "pos", "[2.0]", "two numbers"]),
+    ('pos = [2.0, 1.0]\nvel = [nan, 0.0]\nradius = 0.2', ["circle 2", "vel", "nan", "finite"]),
+    ('pos = [2.0, 1.0]\nvel = [0.0, 0.0]\nradius = -0.2', ["circle 2", "radius", "-0.2", "> 0"]),
+    ('pos = [3.9, 1.0]\nvel = [0.0, 0.0]\nradius = 0.2', ["circle 2", "[3.9, 1.0]", "walls",
+                                                          "3.8"]),
+    ('pos = [2.0, 1.0]\nvel = [0.0, 0.0]\nradius = 0.2\ncolor = [0, 0, 300]',
+     ["circle 2", "color", "300", "255"]),
+], ids=["overlap", "missing_pos", "pos_length", "non_finite", "radius", "outside", "color"])
+def test_bad_circle_entry_exits_2_naming_the_circle(entry, words, tmp_path, capsys,
+                                                    monkeypatch):
+    import circles
+
+    def no_simulation(*args, **kwargs):
+        raise AssertionError("the simulation started")
+
+    monkeypatch.setattr(circles, "init", no_simulation)
+    monkeypatch.setattr(circles, "Simulation", no_simulation)
+    monkeypatch.chdir(tmp_path)
+    Path("bad.toml").write_text(TWO_CIRCLES + "[[circle]]\n" + entry + "\n")
+    assert cli.main(["run", "bad.toml"]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert captured.out == "" and len(lines) == 1, captured.err
+    assert lines[0].startswith("circles: error: bad.toml: ")
+    for word in words:
+        assert word in lines[0]
+
+
+def test_circle_file_mixed_with_random_scene_fields_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    Path("mixed.toml").write_text("n = 10\nspeed = 1.0\n" + TWO_CIRCLES)
+    assert cli.main(["run", "mixed.toml"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "n, speed" in error and "[[circle]]" in error
+    with pytest.raises(ValueError, match="read_circle_list"):
+        circles.Scene.from_toml(CRADLE)
+
+
+def test_circle_file_with_flags_overriding_it(tmp_path):
+    """--box, --boundary and --dt still apply to a file that lists its circles."""
+    (tmp_path / "two.toml").write_text(TWO_CIRCLES)
+    result = run_cli(["run", "two.toml", "--box", "5", "3", "--boundary", "periodic",
+                      "--dt", "0.01", "--duration", "0.2", "--fps", "10", "--size", "50x30",
+                      "--arch", "cpu", "--out", "two.gif"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "2 (event, f64, periodic" in result.stdout and "dt <= 0.01 s" in result.stdout
+    assert iio.imread(tmp_path / "two.gif", index=None).shape[:3] == (2, 30, 50)
