@@ -6,7 +6,7 @@ Pairs are resolved race-free and deterministically: in each round every circle p
 its overlapping approaching neighbours, the pair that touched first (largest overlap over
 approach speed, ties by ids), and mutual picks are resolved together. The pair with the
 smallest key overall is always mutual, so each round resolves at least one pair. After the
-first round only circles next to a resolved pair pick again; the others' picks still hold.
+first round only circles overlapping a resolved circle pick again; the others' picks still hold.
 
 Known errors of the method, which the benchmark measures: a circle faster than about a
 diameter per step can pass through another (tunnelling), overlap is left behind, and
@@ -14,8 +14,7 @@ collisions can be missed or counted twice.
 """
 import taichi as ti
 
-from .event import mark_neighbours_dirty
-from .geometry import NEVER, displacement, key_less, neighbour_cell
+from .geometry import NEVER, displacement, key_less, neighbour_range
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -35,15 +34,47 @@ def move(pos: ndarr, vel: ndarr, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, real:
         pos[i] = x
 
 
+@ti.func
+def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), box,
+              best, best_lo, best_hi, best_p, periodic: ti.template()):
+    """The pick of i updated with its pair with j; returns (key, lo id, hi id, partner, overlapping)."""
+    lo = ti.min(i, j)
+    hi = ti.max(i, j)
+    d = displacement(pos[lo], pos[hi], box, periodic)
+    s = radius[lo] + radius[hi]
+    dist2 = d.dot(d)
+    overlapping = dist2 < s * s
+    if overlapping:
+        dist = ti.sqrt(dist2)
+        vn = (vel[hi] - vel[lo]).dot(d) / ti.max(dist, s * 1e-30)
+        if vn < 0:
+            # -(time since first contact at the current speeds): earliest first.
+            key = -(s - dist) / (-vn)
+            klo = ti.min(ids[i], ids[j])
+            khi = ti.max(ids[i], ids[j])
+            if key_less(key, klo, khi, best, best_lo, best_hi):
+                best, best_lo, best_hi, best_p = key, klo, khi, j
+    return best, best_lo, best_hi, best_p, overlapping
+
+
 @ti.kernel
 def pick(pos: ndarr, vel: ndarr, radius: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr, dirty: ndarr,
-         cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
-         box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(), periodic: ti.template()):
+         contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
+         ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr,
+         real: ti.template(), periodic: ti.template(), scan: ti.template()):
+    """Each dirty circle picks its overlapping approaching pair of smallest key.
+
+    With `scan` (the first round of a step) every circle searches its 3 x 3 cells and keeps
+    its overlapping neighbours in `contacts` (up to contacts.shape[1]; more is marked by
+    a count above that, and such a circle searches its cells again in later rounds). Later
+    rounds only look through the contact lists: positions do not change within a step.
+    """
     n = pos.shape[0]
+    cap = contacts.shape[1]
     box = ti.Vector([box_w, box_h], dt=real)
     counters[0] = 0
     for i in range(n):
-        # A circle keeps its pick unless a pair near it was resolved (see resolve).
+        # A circle keeps its pick unless a circle overlapping it was resolved (see resolve).
         if dirty[i] == 0:
             continue
         dirty[i] = 0
@@ -51,37 +82,65 @@ def pick(pos: ndarr, vel: ndarr, radius: ndarr, ids: ndarr, partner: ndarr, key_
         best_lo = n
         best_hi = n
         best_p = -1
-        c = cell_of[i]
-        for a, b in ti.ndrange(sx, sy):
-            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-            if c2 >= 0:
-                for k in range(cell_start[c2], cell_start[c2 + 1]):
+        listed = n_contacts[i]
+        if ti.static(scan):
+            listed = 0
+        if listed <= cap and not ti.static(scan):
+            for m in range(listed):
+                best, best_lo, best_hi, best_p, _ = _consider(i, contacts[i, m], pos, vel, radius, ids, box, best,
+                                                              best_lo, best_hi, best_p, periodic)
+        else:
+            c = cell_of[i]
+            for row, seg in ti.ndrange(rows, segs):
+                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i:
-                        lo = ti.min(i, j)
-                        hi = ti.max(i, j)
-                        d = displacement(pos[lo], pos[hi], box, periodic)
-                        s = radius[lo] + radius[hi]
-                        dist2 = d.dot(d)
-                        if dist2 < s * s:
-                            dist = ti.sqrt(dist2)
-                            vn = (vel[hi] - vel[lo]).dot(d) / ti.max(dist, s * 1e-30)
-                            if vn < 0:
-                                # -(time since first contact at the current speeds): earliest first.
-                                key = -(s - dist) / (-vn)
-                                klo = ti.min(ids[i], ids[j])
-                                khi = ti.max(ids[i], ids[j])
-                                if key_less(key, klo, khi, best, best_lo, best_hi):
-                                    best, best_lo, best_hi, best_p = key, klo, khi, j
+                        best, best_lo, best_hi, best_p, overlapping = _consider(
+                            i, j, pos, vel, radius, ids, box, best, best_lo, best_hi, best_p, periodic)
+                        if ti.static(scan):
+                            if overlapping:
+                                if listed < cap:
+                                    contacts[i, listed] = j
+                                listed += 1
+            if ti.static(scan):
+                n_contacts[i] = ti.min(listed, cap + 1)
         partner[i] = best_p
         key_t[i] = best
 
 
+@ti.func
+def mark_overlapping_dirty(i, pos: ti.template(), radius: ti.template(), dirty: ti.template(),
+                           contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
+                           cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
+                           periodic: ti.template()):
+    """Mark i and every circle overlapping it for a new pick.
+
+    Positions do not move between rounds, so only pairs with i can change their key when i's
+    velocity changes, and only overlapping pairs have a key: other circles' picks still hold.
+    """
+    dirty[i] = 1
+    listed = n_contacts[i]
+    if listed <= contacts.shape[1]:
+        for m in range(listed):
+            dirty[contacts[i, m]] = 1
+    else:
+        c = cell_of[i]
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                d = displacement(pos[i], pos[j], box, periodic)
+                s = radius[i] + radius[j]
+                if d.dot(d) < s * s:
+                    dirty[j] = 1
+
+
 @ti.kernel
 def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, pair_count: ndarr,
-            virial: ndarr, dirty: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
-            ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
-            periodic: ti.template()):
+            virial: ndarr, dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, cell_of: ndarr,
+            cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
+            box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(), periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=real)
     for i in range(pos.shape[0]):
         j = partner[i]
@@ -96,12 +155,18 @@ def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, 
                 # Same expression for both circles: rounding does not depend on which one is i.
                 vel[i] = vel[i] + (wi * jmp) * nrm
                 vel[j] = vel[j] + (wj * jmp) * (-nrm)
+                # Plain updates, not atomics: a circle is in at most one executed pair per round.
                 owner = i if ids[i] < ids[j] else j
-                pair_count[owner] += 1
-                virial[owner] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
-                ti.atomic_add(counters[0], 1)
-                mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
-                mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                pair_count[owner] = pair_count[owner] + 1
+                virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+                if counters[0] == 0:
+                    # "Something was resolved": a plain store, read first so the shared cache line
+                    # is written once, not bounced between cores for every pair.
+                    counters[0] = 1
+                mark_overlapping_dirty(i, pos, radius, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
+                                       ncx, ncy, rows, segs, box, periodic)
+                mark_overlapping_dirty(j, pos, radius, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
+                                       ncx, ncy, rows, segs, box, periodic)
 
 
 @ti.kernel
@@ -127,7 +192,7 @@ def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: nd
                 if hit:
                     v[a] = -v[a]
             if hit:
-                wall_count[i] += 1
-                wall_impulse[i] += 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+                wall_count[i] = wall_count[i] + 1
+                wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
         pos[i] = x
         vel[i] = v

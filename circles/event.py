@@ -26,7 +26,7 @@ step rebuilds the grid for the new speeds.
 """
 import taichi as ti
 
-from .geometry import NEVER, NO_EVENT, displacement, key_less, neighbour_cell
+from .geometry import NEVER, NO_EVENT, displacement, key_less, neighbour_range
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -56,7 +56,7 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
 
 @ti.kernel
 def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr, dirty: ndarr,
-            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
+            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
             real: ti.template(), periodic: ti.template()) -> ti.f64:
     scalars[0] = ti.cast(NEVER, real)
@@ -87,10 +87,10 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t:
                     if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
                         best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
             c = cell_of[i]
-            for a, b in ti.ndrange(sx, sy):
-                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-                if c2 >= 0:
-                    for k in range(cell_start[c2], cell_start[c2 + 1]):
+            for row, seg in ti.ndrange(rows, segs):
+                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                if k_lo < k_hi:
+                    for k in range(k_lo, k_hi):
                         j = sorted_ids[k]
                         if j != i:
                             lo = ti.min(i, j)
@@ -104,25 +104,27 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t:
             ev_t[i] = best_t
             ev_p[i] = best_p
     for i in range(n):
-        ti.atomic_min(scalars[0], ev_t[i])
+        if ev_t[i] < scalars[0]:
+            # Reading first leaves only the few new minima to the (contended) atomic.
+            ti.atomic_min(scalars[0], ev_t[i])
     return ti.cast(scalars[0], ti.f64)
 
 
 @ti.func
 def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
-                          sorted_ids: ti.template(), ncx, ncy, sx, sy, periodic: ti.template()):
+                          sorted_ids: ti.template(), ncx, ncy, rows, segs, periodic: ti.template()):
     c = cell_of[i]
-    for a, b in ti.ndrange(sx, sy):
-        c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-        if c2 >= 0:
-            for k in range(cell_start[c2], cell_start[c2 + 1]):
+    for row, seg in ti.ndrange(rows, segs):
+        k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+        if k_lo < k_hi:
+            for k in range(k_lo, k_hi):
                 dirty[sorted_ids[k]] = 1
 
 
 @ti.kernel
 def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_in: ndarr,
                 active_out: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-                sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                 real: ti.template(), periodic: ti.template()) -> ti.i32:
     """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)) over the active circles; returns how many D decreased.
 
@@ -149,10 +151,10 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
         tk = tau[k]
         dk = d[k]
         c = cell_of[k]
-        for a, b in ti.ndrange(sx, sy):
-            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-            if c2 >= 0:
-                for m in range(cell_start[c2], cell_start[c2 + 1]):
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            if k_lo < k_hi:
+                for m in range(k_lo, k_hi):
                     l = sorted_ids[m]
                     s = ti.min(ev_t[l], d[l])
                     if l != k and s < dk:
@@ -167,14 +169,14 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
         if dk < d[k]:
             d[k] = dk
             changed += 1
-            mark_neighbours_dirty(k, active_out, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+            mark_neighbours_dirty(k, active_out, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
     return changed
 
 
 @ti.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
             bound_t: ndarr, dirty: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
-            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32,
+            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, t_offset: ti.f64, scalars: ndarr, counters: ndarr,
             log_t: ndarr, log_i: ndarr, log_j: ndarr,
             real: ti.template(), periodic: ti.template(), record: ti.template()) -> ti.i32:
@@ -204,9 +206,9 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     pos[i] = x
                     vel[i] = v
                     tau[i] = e
-                    wall_count[i] += 1
-                    wall_impulse[i] += 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
-                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                    wall_count[i] = wall_count[i] + 1
+                    wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     ti.atomic_add(counters[0], 1)
                     if ti.static(record):
                         slot = ti.atomic_add(counters[1], 1)
@@ -240,9 +242,10 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                         vi = vi_new
                         vj = vj_new
                         # Sums go to the circle of lower creation id (j's thread is idle: its event is this one).
+                        # Plain updates, not atomics: a circle is in at most one executed pair per round.
                         owner = i if ids[i] < ids[j] else j
-                        pair_count[owner] += 1
-                        virial[owner] += ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+                        pair_count[owner] = pair_count[owner] + 1
+                        virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
                         if ti.static(record):
                             slot = ti.atomic_add(counters[1], 1)
                             if slot < log_t.shape[0]:
@@ -256,8 +259,8 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     vel[j] = vj
                     tau[i] = e
                     tau[j] = e
-                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
-                    mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, sx, sy, periodic)
+                    mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
+                    mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     ti.atomic_add(counters[0], 1)
     return counters[0]
 

@@ -38,31 +38,50 @@ def key_less(t1, a1, b1, t2, a2, b2):
 
 
 @ti.func
-def neighbour_cell(c, a, b, ncx, ncy, periodic: ti.template()):
-    """Cell number of the (a, b)-th of the cells around cell c, or -1 outside the walls.
+def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: ti.template()):
+    """Slots [k_lo, k_hi) of `sorted_ids` in segment `seg` of row `row` of the 3 x 3 cells around c.
 
-    a and b run over range(span(ncx)) and range(span(ncy)); in a periodic box with fewer than
-    3 cells along an axis the span covers each cell once, so no pair is seen twice.
+    The three cells of a row are consecutive cell numbers, so a row is one contiguous run of
+    slots: three ranges per circle instead of nine. In a periodic box a row that wraps
+    around the edge splits into two runs (seg 0 and 1); with fewer than 3 cells along an
+    axis the rows and runs cover each cell once, so no pair is seen twice. `row` runs over
+    range(rows) and `seg` over range(segs), with (rows, segs) from `spans`.
     """
     cx = c % ncx
     cy = c // ncx
-    sx = 1 if ncx >= 3 else 0
-    sy = 1 if ncy >= 3 else 0
-    if ti.static(not periodic):
-        sx = 1
-        sy = 1
-    nx = cx + a - sx
-    ny = cy + b - sy
-    out = -1
+    lo = 0
+    hi = 0
     if ti.static(periodic):
-        nx = (nx + ncx) % ncx
-        ny = (ny + ncy) % ncy
-        out = ny * ncx + nx
+        ny = (cy + row - (1 if ncy >= 3 else 0) + ncy) % ncy
+        first = ny * ncx
+        if ncx < 3:
+            lo = first
+            hi = first + ncx
+        else:
+            x0 = cx - 1
+            x1 = cx + 2
+            if x0 < 0:
+                if seg == 0:
+                    lo, hi = first + ncx - 1, first + ncx
+                else:
+                    lo, hi = first, first + x1
+            elif x1 > ncx:
+                if seg == 0:
+                    lo, hi = first + x0, first + ncx
+                else:
+                    lo, hi = first, first + x1 - ncx
+            elif seg == 0:
+                lo, hi = first + x0, first + x1
     else:
-        if 0 <= nx < ncx and 0 <= ny < ncy:
-            out = ny * ncx + nx
-    return out
+        ny = cy + row - 1
+        if 0 <= ny < ncy:
+            lo = ny * ncx + ti.max(cx - 1, 0)
+            hi = ny * ncx + ti.min(cx + 2, ncx)
+    return cell_start[lo], cell_start[hi]
 
 
-def span(ncells: int, periodic: bool) -> int:
-    return min(3, ncells) if periodic else 3
+def spans(ncx: int, ncy: int, periodic: bool):
+    """(rows, segs): the loop bounds of `neighbour_range` for a grid of ncx x ncy cells."""
+    if not periodic:
+        return 3, 1
+    return min(3, ncy), (2 if ncx >= 3 else 1)

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .geometry import span
+from .geometry import spans
 
 
 @ti.kernel
@@ -64,7 +64,7 @@ class Grid:
         self.n = n
         self.box = (float(box[0]), float(box[1]))
         self.periodic = periodic
-        self.max_cells = max_cells or max(64, 2 * n)
+        self.max_cells = max_cells or max(64, 3 * n)
         self.cell_of = ti.ndarray(ti.i32, shape=n)
         self.slot = ti.ndarray(ti.i32, shape=n)
         self.sorted_ids = ti.ndarray(ti.i32, shape=n)
@@ -99,14 +99,10 @@ class Grid:
         _prefix_and_scatter(self.cell_of, self.slot, self.cell_count, self.cell_start, self.sorted_ids,
                             self.ncx * self.ncy)
 
-    @property
-    def spans(self):
-        return span(self.ncx, self.periodic), span(self.ncy, self.periodic)
-
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""
-        sx, sy = self.spans
-        return (self.cell_of, self.cell_start, self.sorted_ids, self.ncx, self.ncy, sx, sy)
+        rows, segs = spans(self.ncx, self.ncy, self.periodic)
+        return (self.cell_of, self.cell_start, self.sorted_ids, self.ncx, self.ncy, rows, segs)
 
     def cells_numpy(self):
         """(cell_of, cell_start, sorted_ids) as numpy arrays, for tests."""

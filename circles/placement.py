@@ -19,7 +19,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .geometry import displacement, neighbour_cell
+from .geometry import displacement, neighbour_range
 from .grid import Grid
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -51,7 +51,7 @@ def uniform(seed, i, k):
 @ti.kernel
 def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: ti.i32, first_draw: ti.i32,
              attempts: ti.i32, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-             sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template()):
+             rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=ti.f64)
     for i in range(pos.shape[0]):
         proposing[i] = 0
@@ -67,10 +67,10 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
                 cy = ti.min(ti.max(ti.cast(ti.floor(x[1] / box_h * ncy), ti.i32), 0), ncy - 1)
                 c = cy * ncx + cx
                 free = True
-                for a, b in ti.ndrange(sx, sy):
-                    c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-                    if c2 >= 0:
-                        for m in range(cell_start[c2], cell_start[c2 + 1]):
+                for row, seg in ti.ndrange(rows, segs):
+                    k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                    if k_lo < k_hi:
+                        for m in range(k_lo, k_hi):
                             j = sorted_ids[m]
                             s = (r + ti.cast(radius[j], ti.f64)) * (1.0 + CLEARANCE)
                             d = displacement(x, ti.cast(pos[j], ti.f64), box, periodic)
@@ -84,7 +84,7 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
 
 @ti.kernel
 def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of: ndarr, cell_start: ndarr,
-            sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64,
+            sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
             periodic: ti.template()) -> ti.i32:
     box = ti.Vector([box_w, box_h], dt=ti.f64)
     accepted = 0
@@ -93,10 +93,10 @@ def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of:
             ok = True
             c = cell_of[i]
             xi = ti.cast(pos[i], ti.f64)
-            for a, b in ti.ndrange(sx, sy):
-                c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-                if c2 >= 0:
-                    for m in range(cell_start[c2], cell_start[c2 + 1]):
+            for row, seg in ti.ndrange(rows, segs):
+                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                if k_lo < k_hi:
+                    for m in range(k_lo, k_hi):
                         j = sorted_ids[m]
                         if j < i:
                             s = ti.cast(radius[i] + radius[j], ti.f64) * (1.0 + CLEARANCE)
@@ -217,7 +217,7 @@ def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Gen
 
 @ti.kernel
 def _grow_limits(pos: ndarr, radius: ndarr, target: ndarr, new_radius: ndarr, cell_of: ndarr, cell_start: ndarr,
-                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64,
+                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
                  real: ti.template(), periodic: ti.template()) -> ti.i32:
     box = ti.Vector([box_w, box_h], dt=ti.f64)
     short = 0
@@ -228,10 +228,10 @@ def _grow_limits(pos: ndarr, radius: ndarr, target: ndarr, new_radius: ndarr, ce
         if ti.static(not periodic):
             allowed = ti.min(allowed, ti.min(ti.min(xi[0], box_w - xi[0]), ti.min(xi[1], box_h - xi[1])))
         c = cell_of[i]
-        for a, b in ti.ndrange(sx, sy):
-            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-            if c2 >= 0:
-                for m in range(cell_start[c2], cell_start[c2 + 1]):
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            if k_lo < k_hi:
+                for m in range(k_lo, k_hi):
                     j = sorted_ids[m]
                     if j != i:
                         d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()

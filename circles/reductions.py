@@ -1,7 +1,7 @@
 """Whole-array kernels: largest speed with a finiteness check, largest overlap, copies."""
 import taichi as ti
 
-from .geometry import displacement, neighbour_cell
+from .geometry import displacement, neighbour_range
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -22,13 +22,14 @@ def max_speed(pos: ndarr, vel: ndarr, out: ndarr):
                 bad = True
         if bad:
             ti.atomic_add(out[1], 1.0)
-        else:
+        elif s > out[0]:
+            # Reading first leaves only the few new maxima to the (contended) atomic.
             ti.atomic_max(out[0], s)
 
 
 @ti.kernel
 def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
-                ncx: ti.i32, ncy: ti.i32, sx: ti.i32, sy: ti.i32, box_w: ti.f64, box_h: ti.f64, out: ndarr,
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, out: ndarr,
                 periodic: ti.template()) -> ti.f64:
     """Largest (r_i + r_j - d_ij) / (r_i + r_j) over all pairs, 0 when none overlap."""
     box = ti.Vector([box_w, box_h], dt=ti.f64)
@@ -36,10 +37,10 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
     for i in range(pos.shape[0]):
         c = cell_of[i]
         xi = ti.cast(pos[i], ti.f64)
-        for a, b in ti.ndrange(sx, sy):
-            c2 = neighbour_cell(c, a, b, ncx, ncy, periodic)
-            if c2 >= 0:
-                for k in range(cell_start[c2], cell_start[c2 + 1]):
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            if k_lo < k_hi:
+                for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j > i:
                         s = ti.cast(radius[i] + radius[j], ti.f64)
@@ -53,6 +54,18 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
 def copy_vec(src: ndarr, dst: ndarr):
     for i in range(src.shape[0]):
         dst[i] = src[i]
+
+
+@ti.kernel
+def _gather(src: ndarr, dst: ndarr, order: ndarr):
+    for k in range(src.shape[0]):
+        dst[k] = src[order[k]]
+
+
+def permute(arr, scratch, order):
+    """arr[k] = arr[order[k]] for every k, through `scratch` (an array like arr)."""
+    _gather(arr, scratch, order)
+    copy_vec(scratch, arr)
 
 
 @ti.kernel

@@ -32,6 +32,8 @@ DISCRETE_MAX_ROUNDS = 16
 MELT_COLLISIONS_PER_CIRCLE = 10
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
+#: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
+DISCRETE_CONTACTS = 4
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
 #: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
@@ -193,7 +195,8 @@ class Simulation:
         self.inv_mass = ti.ndarray(real, shape=n)
         # Internally circles are kept in grid-cell order; `_ids[slot]` is the creation id.
         self.ids = ti.ndarray(ti.i32, shape=n)
-        self._ids = np.arange(n)
+        self._ids_cache = None
+        self._scratch = {}  # one spare array per element type, for _reorder
         # Per-circle sums (a pair counts on its lower id): summed in a fixed order by stats(),
         # so they are the same whatever the thread count.
         self.pair_count = ti.ndarray(ti.i32, shape=n)
@@ -221,6 +224,8 @@ class Simulation:
             if not self._event_arrays:
                 self._dirty = ti.ndarray(ti.i32, shape=n)
             self._key = ti.ndarray(real, shape=n)
+            self._contacts = ti.ndarray(ti.i32, shape=(n, DISCRETE_CONTACTS))
+            self._n_contacts = ti.ndarray(ti.i32, shape=n)
 
     def _alloc_event_arrays(self):
         if self._event_arrays:
@@ -257,7 +262,7 @@ class Simulation:
     def _upload(self, pos, vel, pair_count, wall_count, virial, wall_impulse):
         """Store circles given in creation order, in cell order."""
         order = self._cell_order(pos)
-        self._ids = order
+        self._ids_cache = order
         self.ids.from_numpy(order.astype(np.int32))
         self.pos.from_numpy(pos[order].astype(self._np_real))
         self.vel.from_numpy(vel[order].astype(self._np_real))
@@ -267,6 +272,13 @@ class Simulation:
         self.wall_count.from_numpy(wall_count[order].astype(np.int32))
         self.virial.from_numpy(virial[order].astype(np.float64))
         self.wall_impulse.from_numpy(wall_impulse[order].astype(np.float64))
+
+    @property
+    def _ids(self):
+        """Creation id of the circle in each slot (numpy), fetched after a reorder on the device."""
+        if self._ids_cache is None:
+            self._ids_cache = self.ids.to_numpy().astype(np.int64)
+        return self._ids_cache
 
     def _creation_order(self, arr):
         """An internal per-circle array (numpy) put back in creation order."""
@@ -280,12 +292,22 @@ class Simulation:
                      (self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse))
 
     def _reorder(self):
-        """Sort the arrays by grid cell again, so that neighbours stay close in memory.
+        """Sort the arrays by grid cell again, on the device, so that neighbours stay close in memory.
 
         Results do not depend on the memory order: event keys and the owners of per-circle
-        sums are creation ids, and pair arithmetic is symmetric in the two circles.
+        sums are creation ids, and pair arithmetic is symmetric in the two circles. So the
+        order inside a cell may follow thread timing (the grid's atomic slots) without
+        changing the state.
         """
-        self._upload(*self._download())
+        self.grid.build(self.pos, 2.0 * self._rmax)
+        order = self.grid.sorted_ids
+        for arr in (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self.pair_count, self.wall_count,
+                    self.virial, self.wall_impulse):
+            key = (type(arr).__name__, arr.dtype)
+            if key not in self._scratch:
+                self._scratch[key] = self._like(arr)
+            reductions.permute(arr, self._scratch[key], order)
+        self._ids_cache = None
 
     def _melt(self, rng, scale=1.0):
         """Run the event scheme from the lattice until it is forgotten, then restore the start velocities.
@@ -453,11 +475,12 @@ class Simulation:
         self.grid.build(self.pos, 2.0 * self._rmax)
         g = self.grid.args()
         reductions.fill_i32(self._dirty, 1)
-        for _ in range(DISCRETE_MAX_ROUNDS):
-            discrete.pick(self.pos, self.vel, self.radius, self.ids, self._partner, self._key, self._dirty, *g, w, hgt,
-                          self._counters, real, periodic)
+        contacts = (self._contacts, self._n_contacts)
+        for k in range(DISCRETE_MAX_ROUNDS):
+            discrete.pick(self.pos, self.vel, self.radius, self.ids, self._partner, self._key, self._dirty, *contacts,
+                          *g, w, hgt, self._counters, real, periodic, k == 0)
             discrete.resolve(self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self.pair_count,
-                             self.virial, self._dirty, *g, w, hgt, self._counters, real, periodic)
+                             self.virial, self._dirty, *contacts, *g, w, hgt, self._counters, real, periodic)
             self.rounds += 1
             if self._counters.to_numpy()[0] == 0:
                 break

@@ -20,12 +20,13 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 # Scenes that reach the code paths where order could leak in: random sequential
 # placement and lattice-and-melt placement (area fraction 0.75), both schemes,
-# both boundaries, run for about 2000 to 3000 collisions each.
+# both boundaries, run for about 2000 to 5000 collisions each, and for more steps than
+# REORDER_EVERY, so the arrays are reordered (in an order that follows thread timing) on the way.
 SCENES = {
     "event_walls": dict(n=1500, box=(1.2, 0.9), radius=(0.006, 0.012), boundary="walls",
-                        scheme="event", seed=21, duration=0.04),
+                        scheme="event", seed=21, duration=0.07),
     "event_periodic": dict(n=1500, box=(1.2, 0.9), radius=(0.006, 0.012), boundary="periodic",
-                           scheme="event", seed=22, duration=0.04),
+                           scheme="event", seed=22, duration=0.07),
     "event_dense": dict(n=400, box=(0.164, 0.164), radius=0.004, boundary="walls",
                         scheme="event", seed=23, duration=0.004),
     "discrete_walls": dict(n=1500, box=(1.2, 0.9), radius=(0.006, 0.012), boundary="walls",
