@@ -122,6 +122,25 @@ def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_
 
 
 @ti.kernel
+def seed_bounds(ev_t: ndarr, d: ndarr, active: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, t_end: ti.f64, real: ti.template(),
+                periodic: ti.template()):
+    """Start the bound sweeps of a round: D = t_end everywhere, and active only near events.
+
+    With every D at t_end, a neighbour l can lower D_k only if its own event comes before
+    t_end (min(t_l, D_l) < D_k), so the first sweep needs to visit only the circles next to
+    a circle with an event in the step; circles whose D falls later activate their own
+    neighbours. The fixed point is the same as from an all-active start.
+    """
+    horizon = ti.cast(t_end, real)
+    for i in range(d.shape[0]):
+        d[i] = horizon
+    for i in range(d.shape[0]):
+        if ev_t[i] < horizon:
+            mark_neighbours_dirty(i, active, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
+
+
+@ti.kernel
 def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_in: ndarr,
                 active_out: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
                 rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,

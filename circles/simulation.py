@@ -435,8 +435,7 @@ class Simulation:
             if tmin > t_end:
                 break
             # Only bounds below t_end matter (events lie in [0, t_end]): start the sweeps there.
-            reductions.fill_real(self._d1, t_end)
-            reductions.fill_i32(self._active[0], 1)
+            event.seed_bounds(self._ev_t, self._d1, self._active[0], *g, t_end, real, periodic)
             for sweep in range(MAX_BOUND_SWEEPS + 1):
                 act_in, act_out = self._active[sweep % 2], self._active[(sweep + 1) % 2]
                 if event.bound_sweep(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, act_in,
