@@ -5,6 +5,10 @@ every unplaced circle tries a few random positions against the circles already p
 proposes the first free one; a proposal that overlaps a proposal of a lower id is dropped,
 so the result does not depend on thread timing. Random numbers come from a counter-based
 hash of (seed, circle, attempt), not from a per-thread generator, for the same reason.
+Circles are placed in size classes, largest first (radii within a factor `CLASS_RATIO` of
+the largest unplaced one): a large circle needs a hole free of small ones, which a box
+already sprinkled with small circles no longer has, while small circles always find room
+between large ones.
 
 Above it (RSA jams near 0.547 for equal disks): a hexagonal lattice whose spacing is the
 largest that fits, with every site jittered by at most half the free gap and the circles
@@ -28,6 +32,8 @@ ndarr = ti.types.ndarray(ndim=1)
 RSA_LIMIT = 0.45
 #: Placed circles keep this relative clearance, so rounding to float32 never makes an overlap.
 CLEARANCE = 1e-6
+#: Size classes of random sequential addition: radii in (r / CLASS_RATIO, r] go together.
+CLASS_RATIO = 2.0
 
 
 @ti.func
@@ -50,12 +56,12 @@ def uniform(seed, i, k):
 
 @ti.kernel
 def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: ti.i32, first_draw: ti.i32,
-             attempts: ti.i32, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+             attempts: ti.i32, r_min: ti.f64, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
              rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=ti.f64)
     for i in range(pos.shape[0]):
         proposing[i] = 0
-        if placed[i] == 0:
+        if placed[i] == 0 and radius[i] > r_min:
             r = ti.cast(radius[i], ti.f64)
             for k in range(attempts):
                 draw = first_draw + 2 * k
@@ -119,20 +125,29 @@ def random_sequential(radius: np.ndarray, box, periodic: bool, seed: int, max_ro
     proposing = ti.ndarray(ti.i32, shape=n)
     grid = Grid(n, box, periodic)
     reach = 2.0 * float(radius.max()) * (1.0 + 2 * CLEARANCE)
-    remaining = n
+    unplaced = np.ones(n, bool)
     draw = 0
     seed32 = int(seed) & 0x7FFFFFFF
-    for _ in range(max_rounds):
-        # Few circles left: give each more tries per round (each round costs two grid builds).
-        attempts = 1 if remaining > n // 4 else (4 if remaining > n // 64 else 16)
-        grid.build(pos, reach, include=placed)
-        _propose(pos, rad, placed, proposing, seed32, draw, attempts, *grid.args(), box[0], box[1], periodic)
-        draw += 2 * attempts
-        grid.build(pos, reach, include=proposing)
-        remaining -= _settle(pos, rad, placed, proposing, *grid.args(), box[0], box[1], periodic)
-        if remaining == 0:
-            return pos.to_numpy()
-    return None
+    rounds = 0
+    while unplaced.any():
+        # The class of the largest unplaced circle, and how many circles it holds.
+        r_min = float(radius[unplaced].max()) / CLASS_RATIO
+        in_class = int(np.count_nonzero(unplaced & (radius > r_min)))
+        remaining = in_class
+        while remaining > 0:
+            if rounds == max_rounds:
+                return None
+            rounds += 1
+            # Few circles left: give each more tries per round (each round costs two grid builds).
+            attempts = 1 if remaining > in_class // 4 else (4 if remaining > in_class // 64 else 16)
+            grid.build(pos, reach, include=placed)
+            _propose(pos, rad, placed, proposing, seed32, draw, attempts, r_min, *grid.args(), box[0], box[1],
+                     periodic)
+            draw += 2 * attempts
+            grid.build(pos, reach, include=proposing)
+            remaining -= _settle(pos, rad, placed, proposing, *grid.args(), box[0], box[1], periodic)
+        unplaced &= ~(radius > r_min)
+    return pos.to_numpy()
 
 
 def _lattice_shape(n, usable_w, usable_h, periodic):

@@ -108,3 +108,23 @@ def test_same_seed_same_placement_other_seed_differs(circles_cpu):
     a, b, c = placed(8), placed(8), placed(9)
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     assert not np.array_equal(a.pos, c.pos)
+
+
+def test_wide_radius_spread_places_large_circles_first(circles_cpu):
+    """1% of the circles 50 times larger, area fraction 0.3 (the large ones hold 0.29 of it).
+
+    Placed all at once, the small circles sprinkle the box before most large ones have a
+    place, and then no hole of a large radius is left: random sequential addition jams.
+    Placed by size class, largest first, every circle finds room. Tolerances as above.
+    """
+    from circles import placement
+
+    n, r = 2000, 0.01
+    radius = np.full(n, r)
+    radius[:20] = 50 * r
+    area = float(np.sum(np.pi * radius ** 2)) / 0.3
+    box = (math.sqrt(area * 16 / 9), math.sqrt(area * 9 / 16))
+    pos = placement.random_sequential(radius, box, False, seed=3)
+    assert pos is not None
+    assert pair_overlap(pos, radius) <= 1e-9
+    assert outside_walls(pos, radius, box) <= 1e-9
