@@ -94,7 +94,7 @@ class Scene:
 
     n: number of circles. box: (W, H). radius: r or (rmin, rmax), uniform in the range.
     speed: (vmin, vmax), uniform speeds in random directions. mass: "radius" (m = r, the
-    default), "area" (m = r^2) or "equal" (m = 1). boundary: "walls" or "periodic".
+    default), "area" (m = pi r^2) or "equal" (m = 1). boundary: "walls" or "periodic".
     scheme: "event" (exact) or "discrete" (fast, approximate). precision: "f32" or "f64".
     dt: step length in simulated seconds, None to choose it from the scene. seed: int.
     """

@@ -22,7 +22,8 @@ from .scene import (DENSEST_PACKING, BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEME
 
 #: Speeds may grow by this factor within an event step before the step is cut short.
 SPEED_MARGIN = 1.25
-#: Default event-scheme step: the fastest circle moves this many largest radii per step.
+#: Default event-scheme step: the fastest circle moves this many mean radii per step (the mean, not
+#: the largest: a few large circles must not make every step long and every grid cell wide).
 EVENT_STEP_RADII = 0.3
 #: Default discrete-scheme step: the fastest circle moves this fraction of the smallest radius.
 DISCRETE_STEP_FRACTION = 0.2
@@ -84,7 +85,7 @@ def default_dt(scheme, radius, vel):
     if vmax <= 0:
         return 1.0
     if scheme == "event":
-        return EVENT_STEP_RADII * float(radius.max()) / vmax
+        return EVENT_STEP_RADII * float(radius.mean()) / vmax
     return DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
 
 
