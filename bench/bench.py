@@ -74,12 +74,14 @@ QUICK = dict(
     sizes=(1_000, 10_000, 100_000), event_sizes=(1_000, 10_000, 100_000), reps=5, target=0.3,
     peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000), render_reps=3,
     copy_numbers=1 << 25, copy_reps=5,
-    wp_n=500, wp_duration_mft=10.0, wp_factors=(0.01, 0.04, 0.15, 0.5, 2.0))
+    wp_n=500, wp_duration_mft=10.0, wp_factors=(0.01, 0.04, 0.15, 0.5, 2.0),
+    memory_sizes=(1_000_000,), spread_sizes=(10_000,))
 FULL = dict(
     sizes=(1_000, 10_000, 100_000, 1_000_000), event_sizes=(1_000, 10_000, 100_000, 1_000_000), reps=5,
     target=1.0, peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000, 3_000), render_reps=5,
     copy_numbers=1 << 27, copy_reps=10,
-    wp_n=1500, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0))
+    wp_n=2000, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0),
+    memory_sizes=(1_000_000, 10_000_000), spread_sizes=(10_000, 100_000))
 
 
 def now():
@@ -255,6 +257,103 @@ def measure_placement(n, fraction, reps, aspect=ASPECT):
 
 
 # ----------------------------------------------------------------------- peer
+#: Radius spread scene: this fraction of the circles is SPREAD_RATIO times larger than the rest.
+SPREAD_LARGE_FRACTION = 0.01
+SPREAD_RATIO = 50.0
+
+_MEMORY_SCRIPT = """
+import resource, sys
+import circles
+from circles.scene import Scene
+n, scheme, precision, w, h, r = int(sys.argv[1]), sys.argv[2], sys.argv[3], float(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6])
+circles.init(arch=sys.argv[7])
+sim = circles.Simulation(Scene(n=n, box=(w, h), radius=r, speed=(0.5, 1.0), scheme=scheme, precision=precision))
+sim.step(2)
+sim.stats()
+import numpy as np, taichi as ti
+def arrays(obj):
+    for v in vars(obj).values():
+        for a in (v.values() if isinstance(v, dict) else v if isinstance(v, (tuple, list)) else (v,)):
+            if isinstance(a, ti.lang._ndarray.Ndarray):
+                yield a
+seen = {id(a): a for a in list(arrays(sim)) + list(arrays(sim.grid))}
+size = {ti.f32: 4, ti.i32: 4, ti.f64: 8}
+allocated = sum(int(np.prod(a.shape)) * getattr(a, "n", 1) * size[a.dtype] for a in seen.values())
+print(allocated, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def _peak_kb(n, scheme, precision, arch):
+    box = box_for(n, AREA_FRACTION, ASPECT)
+    out = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT, str(n), scheme, precision, repr(box[0]),
+                          repr(box[1]), repr(R), arch], capture_output=True, text=True, check=True)
+    allocated, peak_kb = map(int, out.stdout.split()[-2:])
+    return allocated, peak_kb
+
+
+def measure_memory(n, scheme, precision, arch, small=1000):
+    """Peak resident memory of a fresh process that places N circles, takes 2 steps and reads the stats.
+
+    Per circle: (peak at N - peak at `small` circles) / (N - small), so the Taichi runtime (which
+    reserves and touches a memory pool at start) and Python are left out, while placement's and
+    stats()' temporary numpy arrays are in: they are part of the peak a user sees.
+    """
+    t0 = now()
+    _, base_kb = _peak_kb(small, scheme, precision, arch)
+    allocated, peak_kb = _peak_kb(n, scheme, precision, arch)
+    return dict(n=n, scheme=scheme, precision=precision, runtime_mb=base_kb / 1024, peak_mb=peak_kb / 1024,
+                bytes_per_circle=(peak_kb - base_kb) * 1024 / (n - small), array_bytes_per_circle=allocated / n,
+                wall_s=now() - t0)
+
+
+def spread_radii(n):
+    """Radii SPREAD_RATIO R (the first 1%) and R (the rest); the box holds them at AREA_FRACTION.
+
+    The large circles come first: placement settles conflicts in favour of lower ids, so they
+    find room before the small ones fill the box.
+    """
+    radius = np.full(n, R)
+    radius[: max(1, int(round(SPREAD_LARGE_FRACTION * n)))] = SPREAD_RATIO * R
+    area = float(np.sum(np.pi * radius ** 2)) / AREA_FRACTION
+    h = math.sqrt(area / ASPECT)
+    return radius, (ASPECT * h, h)
+
+
+def measure_spread(n, scheme, precision, reps, target):
+    """Circle-steps/s of the 1:50 radius mixture against equal radii at the same N, side by side."""
+    from circles import placement
+    radius, box = spread_radii(n)
+    pos = placement.random_sequential(radius, box, False, 0)
+    if pos is None:
+        raise RuntimeError(f"random sequential addition could not place the 1:{SPREAD_RATIO:g} mixture of {n}")
+    rng = np.random.default_rng(1)
+    speed = rng.uniform(*SPEED, n)
+    angle = rng.uniform(0, 2 * np.pi, n)
+    vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
+    rows = {}
+    for label, make in (("equal radii", lambda: circles.Simulation(circles.Scene(
+            n=n, box=box_for(n, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme, precision=precision))),
+                        (f"1:{SPREAD_RATIO:g} ({SPREAD_LARGE_FRACTION:.0%} large)", lambda: circles.Simulation.from_arrays(
+            pos, vel, radius, mass="radius", box=box, scheme=scheme, precision=precision))):
+        sim = make()
+        sim.step(1)
+        t0 = now()
+        sim.step(1)
+        k = int(max(1, round(target / max(now() - t0, 1e-9))))
+        times = []
+        for _ in range(reps):
+            t0 = now()
+            sim.step(k)
+            times.append(now() - t0)
+        s = spread([n * k / t for t in times])
+        rows[label] = dict(s, dt=sim.dt)
+    (eq_label, eq), (sp_label, sp) = rows.items()
+    return dict(n=n, scheme=scheme, precision=precision, equal_dt=eq["dt"], spread_dt=sp["dt"],
+                equal_circle_steps_per_s=eq["median"],
+                spread_circle_steps_per_s=sp["median"], spread_min=sp["min"], spread_max=sp["max"],
+                cost_ratio=eq["median"] / sp["median"])
+
+
 def start_state(n, fraction, aspect, boundary, seed=0):
     box = box_for(n, fraction, aspect)
     scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary=boundary, scheme="event",
@@ -485,7 +584,8 @@ def plot_work_precision(rows, path):
     plt.close(fig)
 
 
-def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios, wp, errors):
+def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios, wp, errors,
+                   memory=(), spreads=()):
     lines = [f"# circles benchmark: {meta['machine_name']}", "",
              f"Command: `{meta['command']}`  ", f"Date: {meta['date']}  ", f"Engine: {meta['revision']}  ",
              f"Machine: {meta['machine_name']}, {meta['cores']} cores; arch {meta['arch']}; taichi {meta['taichi']}, "
@@ -494,7 +594,7 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
              "medians with min and max over repeats.", "",
              "Scene of the throughput and peer rows: circles of radius "
              f"{R} at area fraction {AREA_FRACTION} in a 16:9 walled box, speeds uniform in {SPEED}, "
-             "mass = radius, default dt (event: the fastest circle moves 0.3 radii per step; discrete: 0.2 radii).", ""]
+             "mass = radius, default dt (event: the fastest circle moves 0.3 mean radii per step; discrete: 0.2 smallest radii).", ""]
     lines += ["## Memory copy bandwidth", "",
               md_table(["method", "MB moved", "best GB/s", "median GB/s", "min GB/s"],
                        [[b["method"], b["mbytes"], b["gbps_best"], b["gbps_median"], b["gbps_min"]] for b in bandwidth]),
@@ -525,6 +625,31 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
               md_table(["N", "first call s (compile)", "s per frame median [min, max]"],
                        [[r["n"], r["first_s"], f"{g(r['frame_s_median'])} [{g(r['frame_s_min'])}, {g(r['frame_s_max'])}]"]
                         for r in render]), ""]
+    if memory:
+        lines += ["## Memory", "",
+                  "Peak resident memory of a fresh process that places the scene (area fraction "
+                  f"{AREA_FRACTION}, walls), takes 2 steps and reads the stats; per circle: (peak at N - peak at "
+                  "1000 circles) / (N - 1000), so the Taichi runtime is left out and placement's temporary arrays "
+                  "are in.", "",
+                  "Taichi reserves and touches a memory pool at start, so below a few million circles the "
+                  "peak does not move; the arrays column counts the bytes of every array the simulation and its "
+                  "grid hold, divided by N.", "",
+                  md_table(["N", "scheme", "prec", "peak MB at 1000", "peak MB", "peak bytes per circle",
+                            "array bytes per circle"],
+                           [[m["n"], m["scheme"], m["precision"], m["runtime_mb"], m["peak_mb"], m["bytes_per_circle"],
+                             m["array_bytes_per_circle"]] for m in memory]), ""]
+    if spreads:
+        lines += ["## Radius spread", "",
+                  f"{SPREAD_LARGE_FRACTION:.0%} of the circles {SPREAD_RATIO:g} times larger than the rest, area "
+                  f"fraction {AREA_FRACTION} in all, walls, default dt; against equal radii at the same N and area "
+                  "fraction, side by side. Cost ratio: equal radii circle-steps/s over the mixture's (above 1: the "
+                  "mixture costs more per circle-step).", "",
+                  md_table(["N", "scheme", "prec", "dt equal / mixture", "equal radii circle-steps/s",
+                            "mixture circle-steps/s [min, max]", "cost ratio"],
+                           [[sp["n"], sp["scheme"], sp["precision"], f"{g(sp['equal_dt'])} / {g(sp['spread_dt'])}",
+                             sp["equal_circle_steps_per_s"],
+                             f"{g(sp['spread_circle_steps_per_s'])} [{g(sp['spread_min'])}, {g(sp['spread_max'])}]",
+                             sp["cost_ratio"]] for sp in spreads]), ""]
     lines += ["## Peer: pymunk (Chipmunk2D, one thread) on the same scene and dt as `discrete`", "",
               md_table(["N", "dt", "steps/s median [min, max]", "circle-steps/s", "sim time / wall s",
                         "energy change", "max overlap"],
@@ -567,7 +692,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller sizes, a few minutes on a 2-core CPU")
     ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
     ap.add_argument("--out", default="outputs/bench")
-    ap.add_argument("--skip", default="", help="comma list of sections to skip: throughput,peers,placement,wp")
+    ap.add_argument("--skip", default="", help="comma list of sections to skip: "
+                    "throughput,placement,memory,spread,peers,wp")
     args = ap.parse_args(argv)
     cfg = QUICK if args.quick else FULL
     skip = set(filter(None, args.skip.split(",")))
@@ -648,6 +774,25 @@ def main(argv=None):
                 placement.append(p)
                 log(f"  N={n}: {p['place_s_median']:.3g} s")
 
+    memory, spreads = [], []
+    if "memory" not in skip:
+        log("memory")
+        for n in cfg["memory_sizes"]:
+            for scheme in SCHEMES:
+                m = guarded(f"memory N={n} {scheme}", measure_memory, n, scheme, "f32", arch)
+                if m:
+                    memory.append(m)
+                    log(f"  N={n} {scheme} f32: {m['bytes_per_circle']:.0f} B per circle at peak, "
+                        f"{m['array_bytes_per_circle']:.0f} B in arrays, peak {m['peak_mb']:.0f} MB")
+    if "spread" not in skip:
+        log("radius spread")
+        for n in cfg["spread_sizes"]:
+            for scheme in SCHEMES:
+                sp = guarded(f"spread N={n} {scheme}", measure_spread, n, scheme, "f32", cfg["reps"], cfg["target"])
+                if sp:
+                    spreads.append(sp)
+                    log(f"  N={n} {scheme}: 1:{SPREAD_RATIO:g} mixture costs {sp['cost_ratio']:.2f}x equal radii")
+
     peers, ratios = [], []
     if "peers" not in skip:
         log("peer: pymunk")
@@ -684,10 +829,12 @@ def main(argv=None):
     write_csv(os.path.join(outdir, "compile.csv"), compile_rows)
     write_csv(os.path.join(outdir, "peers.csv"), peers + [dict(peer="ratio circles/pymunk", **r) for r in ratios])
     write_csv(os.path.join(outdir, "work_precision.csv"), wp)
+    write_csv(os.path.join(outdir, "memory.csv"), memory)
+    write_csv(os.path.join(outdir, "spread.csv"), spreads)
     if wp:
         guarded("plot", plot_work_precision, wp, os.path.join(outdir, "work_precision.png"))
     write_markdown(os.path.join(outdir, "results.md"), meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios,
-                   wp, errors)
+                   wp, errors, memory, spreads)
     log(f"done in {now() - start:.0f} s: {outdir}")
     return 1 if errors else 0
 
