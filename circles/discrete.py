@@ -15,13 +15,13 @@ collisions can be missed or counted twice.
 import taichi as ti
 
 from .geometry import NEVER, displacement, key_less, neighbour_range
+from .grid import build_cells
 
 ndarr = ti.types.ndarray(ndim=1)
 
 
-@ti.kernel
-def move(pos: ndarr, vel: ndarr, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, real: ti.template(),
-         periodic: ti.template()):
+@ti.func
+def _move(pos: ti.template(), vel: ti.template(), dt, box_w, box_h, real: ti.template(), periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=real)
     h = ti.cast(dt, real)
     for i in range(pos.shape[0]):
@@ -57,11 +57,11 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
     return best, best_lo, best_hi, best_p, overlapping
 
 
-@ti.kernel
-def pick(pos: ndarr, vel: ndarr, radius: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr, dirty: ndarr,
-         contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
-         ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr,
-         real: ti.template(), periodic: ti.template(), scan: ti.template()):
+@ti.func
+def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), partner: ti.template(),
+          key_t: ti.template(), dirty: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+          cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
+          box_h, counters: ti.template(), real: ti.template(), periodic: ti.template(), scan: ti.template()):
     """Each dirty circle picks its overlapping approaching pair of smallest key.
 
     With `scan` (the first round of a step) every circle searches its 3 x 3 cells and keeps
@@ -85,7 +85,7 @@ def pick(pos: ndarr, vel: ndarr, radius: ndarr, ids: ndarr, partner: ndarr, key_
         listed = n_contacts[i]
         if ti.static(scan):
             listed = 0
-        if listed <= cap and not ti.static(scan):
+        if not ti.static(scan) and listed <= cap:
             for m in range(listed):
                 best, best_lo, best_hi, best_p, _ = _consider(i, contacts[i, m], pos, vel, radius, ids, box, best,
                                                               best_lo, best_hi, best_p, periodic)
@@ -136,11 +136,12 @@ def mark_overlapping_dirty(i, pos: ti.template(), radius: ti.template(), dirty: 
                     dirty[j] = 1
 
 
-@ti.kernel
-def resolve(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, pair_count: ndarr,
-            virial: ndarr, dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, cell_of: ndarr,
-            cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
-            box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(), periodic: ti.template()):
+@ti.func
+def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+             ids: ti.template(), partner: ti.template(), pair_count: ti.template(), virial: ti.template(),
+             dirty: ti.template(), contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
+             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+             counters: ti.template(), real: ti.template(), periodic: ti.template()):
     box = ti.Vector([box_w, box_h], dt=real)
     for i in range(pos.shape[0]):
         j = partner[i]
@@ -196,3 +197,51 @@ def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: nd
                 wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
         pos[i] = x
         vel[i] = v
+
+
+@ti.func
+def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+            ids: ti.template(), partner: ti.template(), key_t: ti.template(), dirty: ti.template(),
+            contacts: ti.template(), n_contacts: ti.template(), pair_count: ti.template(), virial: ti.template(),
+            cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
+            box_w, box_h, counters: ti.template(), real: ti.template(), periodic: ti.template(),
+            rounds: ti.template(), first_scans: ti.template()):
+    """`rounds` rounds of pick and resolve as top-level loops; a round after one that resolved
+    nothing finds no dirty circle and no mutual approaching pick, so it changes nothing."""
+    for r in ti.static(range(rounds)):
+        _pick(pos, vel, radius, ids, partner, key_t, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
+              ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, ti.static(first_scans and r == 0))
+        _resolve(pos, vel, radius, inv_mass, ids, partner, pair_count, virial, dirty, contacts, n_contacts,
+                 cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic)
+
+
+@ti.kernel
+def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr,
+               dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, pair_count: ndarr,
+               virial: ndarr, mask: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
+               sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
+               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
+               periodic: ti.template(), rounds: ti.template()) -> ti.i32:
+    """Move, grid and the first `rounds` rounds of pair resolution, in one launch (launches cost
+    tens of microseconds each, which is the whole step for a few thousand circles). Returns 1
+    when the last round resolved a pair (more rounds may be needed), else 0."""
+    _move(pos, vel, dt, box_w, box_h, real, periodic)
+    build_cells(pos, mask, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, False)
+    for i in range(pos.shape[0]):
+        dirty[i] = 1
+    _rounds(pos, vel, radius, inv_mass, ids, partner, key_t, dirty, contacts, n_contacts, pair_count, virial,
+            cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, rounds,
+            True)
+    return counters[0]
+
+
+@ti.kernel
+def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr,
+                dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, pair_count: ndarr,
+                virial: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
+                periodic: ti.template(), rounds: ti.template()) -> ti.i32:
+    _rounds(pos, vel, radius, inv_mass, ids, partner, key_t, dirty, contacts, n_contacts, pair_count, virial,
+            cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, rounds,
+            False)
+    return counters[0]

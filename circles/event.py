@@ -28,6 +28,9 @@ import taichi as ti
 
 from .geometry import NEVER, NO_EVENT, displacement, key_less, neighbour_range
 
+#: Bound sweeps per launch (even: the two flag arrays swap roles each sweep).
+SWEEPS_PER_LAUNCH = 4
+
 ndarr = ti.types.ndarray(ndim=1)
 
 
@@ -54,11 +57,12 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     return t
 
 
-@ti.kernel
-def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr, dirty: ndarr,
-            cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
-            box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
-            real: ti.template(), periodic: ti.template()) -> ti.f64:
+@ti.func
+def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ids: ti.template(),
+             ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), cell_of: ti.template(),
+             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, t_end,
+             scalars: ti.template(), real: ti.template(), periodic: ti.template()):
+    """Each dirty circle finds its earliest event; scalars[0] = the earliest event of all."""
     scalars[0] = ti.cast(NEVER, real)
     n = pos.shape[0]
     box = ti.Vector([box_w, box_h], dt=real)
@@ -107,7 +111,6 @@ def predict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t:
         if ev_t[i] < scalars[0]:
             # Reading first leaves only the few new minima to the (contended) atomic.
             ti.atomic_min(scalars[0], ev_t[i])
-    return ti.cast(scalars[0], ti.f64)
 
 
 @ti.func
@@ -121,10 +124,10 @@ def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_
                 dirty[sorted_ids[k]] = 1
 
 
-@ti.kernel
-def seed_bounds(ev_t: ndarr, d: ndarr, active: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
-                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, t_end: ti.f64, real: ti.template(),
-                periodic: ti.template()):
+@ti.func
+def _seed_bounds(ev_t: ti.template(), d: ti.template(), active: ti.template(), cell_of: ti.template(),
+                 cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, t_end,
+                 real: ti.template(), periodic: ti.template()):
     """Start the bound sweeps of a round: D = t_end everywhere, and active only near events.
 
     With every D at t_end, a neighbour l can lower D_k only if its own event comes before
@@ -140,11 +143,11 @@ def seed_bounds(ev_t: ndarr, d: ndarr, active: ndarr, cell_of: ndarr, cell_start
             mark_neighbours_dirty(i, active, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
 
 
-@ti.kernel
-def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_in: ndarr,
-                active_out: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-                real: ti.template(), periodic: ti.template()) -> ti.i32:
+@ti.func
+def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                 ev_t: ti.template(), d: ti.template(), active_in: ti.template(), active_out: ti.template(),
+                 cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
+                 box_w, box_h, t_end, vlim, real: ti.template(), periodic: ti.template()):
     """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)) over the active circles; returns how many D decreased.
 
     F_kl(s) is the earliest time at which k, on its straight path, can meet l when l leaves
@@ -192,6 +195,68 @@ def bound_sweep(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
     return changed
 
 
+@ti.func
+def _sweeps(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ev_t: ti.template(),
+            d: ti.template(), active_a: ti.template(), active_b: ti.template(), cell_of: ti.template(),
+            cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, t_end, vlim,
+            real: ti.template(), periodic: ti.template()):
+    """SWEEPS_PER_LAUNCH sweeps (an even number, so the flags end in `active_a` again); returns how
+    many D decreased in the last one. A sweep after one that changed nothing finds no active circle."""
+    changed = 0
+    for _ in ti.static(range(SWEEPS_PER_LAUNCH // 2)):
+        _bound_sweep(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
+                     rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+        changed = _bound_sweep(pos, vel, radius, tau, ev_t, d, active_b, active_a, cell_of, cell_start, sorted_ids,
+                               ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+    return changed
+
+
+@ti.kernel
+def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
+                dirty: ndarr, d: ndarr, active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
+                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64,
+                box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, scalars: ndarr, real: ti.template(),
+                periodic: ti.template()) -> ti.f64:
+    """Predict, seed the bounds and run the first sweeps, in one launch (launches cost tens of
+    microseconds each). Returns the earliest event time when the bounds have settled (no event
+    in the step when it exceeds t_end), or -1 when more sweeps are needed."""
+    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
+             box_w, box_h, t_end, scalars, real, periodic)
+    _seed_bounds(ev_t, d, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real, periodic)
+    changed = _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
+                      rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+    result = ti.cast(scalars[0], ti.f64)
+    if changed != 0:
+        result = -1.0
+    return result
+
+
+@ti.kernel
+def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_a: ndarr,
+                active_b: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+                real: ti.template(), periodic: ti.template()) -> ti.i32:
+    return _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
+                   rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+
+
+@ti.kernel
+def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
+               pos_b: ndarr, vel_b: ndarr, pair_count_b: ndarr, wall_count_b: ndarr, virial_b: ndarr,
+               wall_impulse_b: ndarr, dirty: ndarr, scalars: ndarr, real: ti.template()):
+    """Back up what a step changes (a cut step is redone from it), and mark every circle to predict."""
+    for i in range(pos.shape[0]):
+        pos_b[i] = pos[i]
+        vel_b[i] = vel[i]
+        pair_count_b[i] = pair_count[i]
+        wall_count_b[i] = wall_count[i]
+        virial_b[i] = virial[i]
+        wall_impulse_b[i] = wall_impulse[i]
+        dirty[i] = 1
+    scalars[0] = ti.cast(NEVER, real)
+    scalars[1] = ti.cast(NEVER, real)
+
+
 @ti.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
             bound_t: ndarr, dirty: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
@@ -228,7 +293,8 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     wall_count[i] = wall_count[i] + 1
                     wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
-                    ti.atomic_add(counters[0], 1)
+                    if counters[0] == 0:
+                        counters[0] = 1  # progress flag: a plain store, written once
                     if ti.static(record):
                         slot = ti.atomic_add(counters[1], 1)
                         if slot < log_t.shape[0]:
@@ -280,8 +346,12 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     tau[j] = e
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
-                    ti.atomic_add(counters[0], 1)
-    return counters[0]
+                    if counters[0] == 0:
+                        counters[0] = 1  # progress flag: a plain store, written once
+    result = counters[0]
+    if scalars[1] < horizon:
+        result = -1  # a collision would outrun the grid: the step is cut at scalars[1]
+    return result
 
 
 @ti.kernel

@@ -18,10 +18,11 @@ import taichi as ti
 from .geometry import spans
 
 
-@ti.kernel
-def _count(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
-           slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
-           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template()):
+@ti.func
+def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
+                cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
+                inv_ch, masked: ti.template()):
+    """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel."""
     for c in range(ncx * ncy):
         cell_count[c] = 0
     for i in range(pos.shape[0]):
@@ -41,20 +42,22 @@ def _count(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cel
             slot[i] = ti.atomic_add(cell_count[c], 1)
         else:
             cell_of[i] = -1
-
-
-@ti.kernel
-def _prefix_and_scatter(cell_of: ti.types.ndarray(ndim=1), slot: ti.types.ndarray(ndim=1),
-                        cell_count: ti.types.ndarray(ndim=1), cell_start: ti.types.ndarray(ndim=1),
-                        sorted_ids: ti.types.ndarray(ndim=1), ncells: ti.i32):
     cell_start[0] = 0
     ti.loop_config(serialize=True)
-    for c in range(ncells):
+    for c in range(ncx * ncy):
         cell_start[c + 1] = cell_start[c] + cell_count[c]
     for i in range(cell_of.shape[0]):
         c = cell_of[i]
         if c >= 0:
             sorted_ids[cell_start[c] + slot[i]] = i
+
+
+@ti.kernel
+def _build(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
+           slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1),
+           cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
+           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template()):
+    build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, masked)
 
 
 class Grid:
@@ -88,16 +91,19 @@ class Grid:
             pass
         return ncx, ncy
 
-    def build(self, pos, reach, include=None):
-        """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
+    def prepare(self, reach):
+        """Set the cells for `reach`; returns the arguments of `build_cells` after pos (no mask)."""
         self.ncx, self.ncy = self.shape_for(reach)
         self.reach = reach
         w, h = self.box
+        return (self._dummy_mask, self.cell_of, self.slot, self.cell_count, self.cell_start, self.sorted_ids,
+                self.ncx, self.ncy, self.ncx / w, self.ncy / h)
+
+    def build(self, pos, reach, include=None):
+        """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
+        mask, *rest = self.prepare(reach)
         masked = include is not None
-        _count(pos, include if masked else self._dummy_mask, self.cell_of, self.slot, self.cell_count,
-               self.ncx, self.ncy, self.ncx / w, self.ncy / h, masked)
-        _prefix_and_scatter(self.cell_of, self.slot, self.cell_count, self.cell_start, self.sorted_ids,
-                            self.ncx * self.ncy)
+        _build(pos, include if masked else mask, *rest, masked)
 
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""

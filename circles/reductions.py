@@ -7,8 +7,11 @@ ndarr = ti.types.ndarray(ndim=1)
 
 
 @ti.kernel
-def max_speed(pos: ndarr, vel: ndarr, out: ndarr):
-    """out[0] = largest |v|; out[1] = number of circles with a non-finite position or velocity."""
+def max_speed(pos: ndarr, vel: ndarr, out: ndarr) -> ti.f64:
+    """Largest |v|, or minus the number of circles with a non-finite position or velocity.
+
+    One value, returned by the kernel: a separate read-back would cost a second launch.
+    """
     out[0] = 0.0
     out[1] = 0.0
     for i in range(pos.shape[0]):
@@ -25,6 +28,10 @@ def max_speed(pos: ndarr, vel: ndarr, out: ndarr):
         elif s > out[0]:
             # Reading first leaves only the few new maxima to the (contended) atomic.
             ti.atomic_max(out[0], s)
+    result = out[0]
+    if out[1] > 0:
+        result = -out[1]
+    return result
 
 
 @ti.kernel
@@ -56,16 +63,28 @@ def copy_vec(src: ndarr, dst: ndarr):
         dst[i] = src[i]
 
 
+@ti.func
+def _permute_one(arr: ti.template(), scratch: ti.template(), order: ti.template()):
+    for k in range(arr.shape[0]):
+        scratch[k] = arr[order[k]]
+    for k in range(arr.shape[0]):
+        arr[k] = scratch[k]
+
+
 @ti.kernel
-def _gather(src: ndarr, dst: ndarr, order: ndarr):
-    for k in range(src.shape[0]):
-        dst[k] = src[order[k]]
-
-
-def permute(arr, scratch, order):
-    """arr[k] = arr[order[k]] for every k, through `scratch` (an array like arr)."""
-    _gather(arr, scratch, order)
-    copy_vec(scratch, arr)
+def permute_state(order: ndarr, pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr,
+                  pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr, vec_scratch: ndarr,
+                  real_scratch: ndarr, int_scratch: ndarr, f64_scratch: ndarr):
+    """arr[k] = arr[order[k]] for every per-circle array, in one launch (scratch arrays of each kind)."""
+    _permute_one(pos, vec_scratch, order)
+    _permute_one(vel, vec_scratch, order)
+    _permute_one(radius, real_scratch, order)
+    _permute_one(inv_mass, real_scratch, order)
+    _permute_one(ids, int_scratch, order)
+    _permute_one(pair_count, int_scratch, order)
+    _permute_one(wall_count, int_scratch, order)
+    _permute_one(virial, f64_scratch, order)
+    _permute_one(wall_impulse, f64_scratch, order)
 
 
 @ti.kernel

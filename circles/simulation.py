@@ -16,6 +16,7 @@ import taichi as ti
 from . import discrete, event, placement, reductions
 from .backend import ensure_init
 from .geometry import NEVER
+from .geometry import spans
 from .grid import Grid
 from .scene import (DENSEST_PACKING, BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
@@ -29,6 +30,8 @@ EVENT_STEP_RADII = 0.3
 DISCRETE_STEP_FRACTION = 0.2
 #: Rounds of pair resolution per discrete step; what is left stays for the next step.
 DISCRETE_MAX_ROUNDS = 16
+#: Rounds run in the same launch as the move and the grid (more follow only when needed).
+DISCRETE_FUSED_ROUNDS = 4
 #: A lattice start is melted until circles have had this many collisions each on average.
 MELT_COLLISIONS_PER_CIRCLE = 10
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
@@ -197,7 +200,7 @@ class Simulation:
         # Internally circles are kept in grid-cell order; `_ids[slot]` is the creation id.
         self.ids = ti.ndarray(ti.i32, shape=n)
         self._ids_cache = None
-        self._scratch = {}  # one spare array per element type, for _reorder
+        self._scratch = None  # spare arrays of each element type, for _reorder
         # Per-circle sums (a pair counts on its lower id): summed in a fixed order by stats(),
         # so they are the same whatever the thread count.
         self.pair_count = ti.ndarray(ti.i32, shape=n)
@@ -301,13 +304,11 @@ class Simulation:
         changing the state.
         """
         self.grid.build(self.pos, 2.0 * self._rmax)
-        order = self.grid.sorted_ids
-        for arr in (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self.pair_count, self.wall_count,
-                    self.virial, self.wall_impulse):
-            key = (type(arr).__name__, arr.dtype)
-            if key not in self._scratch:
-                self._scratch[key] = self._like(arr)
-            reductions.permute(arr, self._scratch[key], order)
+        if self._scratch is None:
+            self._scratch = (self._like(self.pos), self._like(self.radius), self._like(self.ids),
+                             self._like(self.virial))
+        reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
+                                 self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch)
         self._ids_cache = None
 
     def _melt(self, rng, scale=1.0):
@@ -394,8 +395,8 @@ class Simulation:
         return self._discrete_step(h)
 
     def _max_speed(self):
-        reductions.max_speed(self.pos, self.vel, self._speed_out)
-        vmax, bad = self._speed_out.to_numpy()
+        vmax = reductions.max_speed(self.pos, self.vel, self._speed_out)
+        bad = -vmax if vmax < 0 else 0
         if bad:
             raise FloatingPointError(f"{int(bad)} circles have a non-finite position or velocity at time "
                                      f"{self.time}: the state is broken, the run stops here")
@@ -424,66 +425,69 @@ class Simulation:
         self.grid.build(self.pos, reach)
         g = self.grid.args()
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
-        for name, arr in self._backup.items():
-            reductions.copy_vec(getattr(self, name), arr)
-        log_count = int(self._counters.to_numpy()[1])
+        b = self._backup
+        event.begin_step(self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
+                         b["pos"], b["vel"], b["pair_count"], b["wall_count"], b["virial"], b["wall_impulse"],
+                         self._dirty, self._scalars, real)
+        log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
-        reductions.fill_i32(self._dirty, 1)
-        self._set_scalars(NEVER, NEVER)
+        sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
         while True:
-            tmin = event.predict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p, self._dirty,
-                                 *g, w, hgt, t_end, self._scalars, real, periodic)
+            tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
+                                     self._dirty, self._d1, *self._active, *g, w, hgt, t_end, vlim, self._scalars,
+                                     real, periodic)
             if tmin > t_end:
                 break
-            # Only bounds below t_end matter (events lie in [0, t_end]): start the sweeps there.
-            event.seed_bounds(self._ev_t, self._d1, self._active[0], *g, t_end, real, periodic)
-            for sweep in range(MAX_BOUND_SWEEPS + 1):
-                act_in, act_out = self._active[sweep % 2], self._active[(sweep + 1) % 2]
-                if event.bound_sweep(self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, act_in,
-                                     act_out, *g, w, hgt, t_end, vlim, real, periodic) == 0:
+            # The bounds have settled when tmin >= 0; -1 asks for more sweeps.
+            sweeps = event.SWEEPS_PER_LAUNCH
+            while tmin < 0:
+                if event.more_sweeps(*sweep_args, t_end, vlim, real, periodic) == 0:
                     break  # nothing decreased, so nothing was marked: both flag arrays are clear
-            else:
-                raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
-            self.sweeps += sweep + 1
+                sweeps += event.SWEEPS_PER_LAUNCH
+                if sweeps > MAX_BOUND_SWEEPS:
+                    raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
+            self.sweeps += sweeps
             executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
-                                     self._ev_p,
-                                     self._d1, self._dirty, self.pair_count, self.wall_count, self.virial,
-                                     self.wall_impulse, *g, w, hgt, t_end, vlim, self.time, self._scalars,
-                                     self._counters, self._log_t, self._log_i, self._log_j, real, periodic, record)
+                                     self._ev_p, self._d1, self._dirty, self.pair_count, self.wall_count,
+                                     self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
+                                     self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
+                                     periodic, record)
             self.rounds += 1
-            cut = float(self._scalars.to_numpy()[1])
-            if cut < t_end:
+            if executed < 0:
                 # A collision would outrun the grid: redo the step up to it (see circles.event).
+                cut = float(self._scalars.to_numpy()[1])
                 for name, arr in self._backup.items():
                     reductions.copy_vec(arr, getattr(self, name))
                 reductions.fill_real(self.tau, 0.0)
                 reductions.fill_i32(self._dirty, 1)
-                self._set_counter(1, log_count)
+                if record:
+                    self._set_counter(1, log_count)
                 self._set_scalars(NEVER, NEVER)
                 t_end = cut
                 self.redone_steps += 1
                 continue
             if executed == 0:
-                raise RuntimeError(f"event rounds made no progress at step time {tmin} (internal error)")
+                raise RuntimeError(f"event rounds made no progress at step time {self._scalars.to_numpy()[0]} "
+                                   "(internal error)")
         event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
         return t_end
 
     def _discrete_step(self, h):
         w, hgt = self.box
         real, periodic = self._real, self.periodic
-        discrete.move(self.pos, self.vel, h, w, hgt, real, periodic)
-        self.grid.build(self.pos, 2.0 * self._rmax)
-        g = self.grid.args()
-        reductions.fill_i32(self._dirty, 1)
-        contacts = (self._contacts, self._n_contacts)
-        for k in range(DISCRETE_MAX_ROUNDS):
-            discrete.pick(self.pos, self.vel, self.radius, self.ids, self._partner, self._key, self._dirty, *contacts,
-                          *g, w, hgt, self._counters, real, periodic, k == 0)
-            discrete.resolve(self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self.pair_count,
-                             self.virial, self._dirty, *contacts, *g, w, hgt, self._counters, real, periodic)
-            self.rounds += 1
-            if self._counters.to_numpy()[0] == 0:
-                break
+        mask, *cells = self.grid.prepare(2.0 * self._rmax)
+        rows, segs = spans(self.grid.ncx, self.grid.ncy, periodic)
+        arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._key, self._dirty,
+                  self._contacts, self._n_contacts, self.pair_count, self.virial)
+        busy = discrete.begin_step(*arrays, mask, *cells, rows, segs, h, w, hgt, self._counters, real, periodic,
+                                   DISCRETE_FUSED_ROUNDS)
+        done = DISCRETE_FUSED_ROUNDS
+        # Most steps settle within the fused rounds; `busy` says whether the last one resolved a pair.
+        while busy and done < DISCRETE_MAX_ROUNDS:
+            more = min(DISCRETE_FUSED_ROUNDS, DISCRETE_MAX_ROUNDS - done)
+            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._counters, real, periodic, more)
+            done += more
+        self.rounds += done
         if not periodic:
             discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
                            w, hgt, real)
