@@ -291,7 +291,6 @@ def _run(scene, options):
     stats_s = time.perf_counter() - tick
     width, height = options["size"]
     times = frame_times(options["duration"], options["fps"])
-    periodic = sim.boundary == "periodic"
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
     writer = FrameWriter(options["out"], options["fps"])
@@ -304,13 +303,10 @@ def _run(scene, options):
         signal.signal(signal.SIGINT, stop)
         for k in range(len(times)):
             tick = time.perf_counter()
-            state = sim.state()
             if speed_scale is None:
                 # Fixed for the whole run, so that a colour means one speed in every frame.
-                speed_scale = canvas.speed_scale_of(state.vel)
-            frame = canvas.render(state.pos, state.vel, state.radius, state.color, sim.box,
-                                  width, height, options["color"], speed_scale=speed_scale,
-                                  periodic=periodic)
+                speed_scale = canvas.speed_scale_of(sim.state().vel)
+            frame = sim.render(width, height, options["color"], speed_scale=speed_scale)
             clock["render"] += time.perf_counter() - tick
             tick = time.perf_counter()
             writer.write(frame)

@@ -181,3 +181,19 @@ def test_gpu_layout_draws_the_same_image(canvas, monkeypatch):
     gpu_layout_image = canvas.render(*args, periodic=True)
     assert canvas._buffers.tiles_per_item == 1
     assert (cpu_image == gpu_layout_image).all()
+
+
+@pytest.mark.parametrize("mode", ["random", "speed"])
+def test_simulation_render_draws_its_state(canvas, circles_cpu, mode):
+    """Simulation.render draws the circles in their storage order (cell order after the
+    reorderings of a run), not in creation order: coverage sums are exact integers, so the
+    image must equal, bit for bit, the one drawn from state() in creation order."""
+    from circles.simulation import REORDER_EVERY
+
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=3000, box=(16.0, 9.0), radius=(0.02, 0.06),
+                                                   speed=(0.5, 1.5), scheme="discrete", seed=4))
+    sim.step(REORDER_EVERY + 1)
+    assert not np.array_equal(sim._ids, np.arange(sim.n))  # storage order is not creation order
+    s = sim.state()
+    expected = canvas.render(s.pos, s.vel, s.radius, s.color, sim.box, 480, 270, mode)
+    assert np.array_equal(sim.render(480, 270, mode), expected)
