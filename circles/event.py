@@ -93,18 +93,17 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             c = cell_of[i]
             for row, seg in ti.ndrange(rows, segs):
                 k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-                if k_lo < k_hi:
-                    for k in range(k_lo, k_hi):
-                        j = sorted_ids[k]
-                        if j != i:
-                            lo = ti.min(i, j)
-                            hi = ti.max(i, j)
-                            t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
-                            # Keys use creation ids, so ties break the same whatever the memory order.
-                            klo = ti.min(ids[i], ids[j])
-                            khi = ti.max(ids[i], ids[j])
-                            if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
-                                best_t, best_lo, best_hi, best_p = t, klo, khi, j
+                for k in range(k_lo, k_hi):
+                    j = sorted_ids[k]
+                    if j != i:
+                        lo = ti.min(i, j)
+                        hi = ti.max(i, j)
+                        t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
+                        # Keys use creation ids, so ties break the same whatever the memory order.
+                        klo = ti.min(ids[i], ids[j])
+                        khi = ti.max(ids[i], ids[j])
+                        if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
+                            best_t, best_lo, best_hi, best_p = t, klo, khi, j
             ev_t[i] = best_t
             ev_p[i] = best_p
     for i in range(n):
@@ -119,9 +118,8 @@ def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_
     c = cell_of[i]
     for row, seg in ti.ndrange(rows, segs):
         k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-        if k_lo < k_hi:
-            for k in range(k_lo, k_hi):
-                dirty[sorted_ids[k]] = 1
+        for k in range(k_lo, k_hi):
+            dirty[sorted_ids[k]] = 1
 
 
 @ti.func
@@ -175,19 +173,18 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
         c = cell_of[k]
         for row, seg in ti.ndrange(rows, segs):
             k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-            if k_lo < k_hi:
-                for m in range(k_lo, k_hi):
-                    l = sorted_ids[m]
-                    s = ti.min(ev_t[l], d[l])
-                    if l != k and s < dk:
-                        t0 = ti.max(s, ti.max(tk, tau[l]))
-                        gap = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box,
-                                           periodic).norm() - rk - radius[l]
-                        dv = (vel[l] - vk).norm()
-                        # F >= s exactly; the max keeps round-off from putting it below.
-                        arrival = ti.max(s, (ti.max(gap, 0.0) + dv * t0 + two_v * s) / (dv + two_v))
-                        if arrival < dk:
-                            dk = arrival
+            for m in range(k_lo, k_hi):
+                l = sorted_ids[m]
+                s = ti.min(ev_t[l], d[l])
+                if l != k and s < dk:
+                    t0 = ti.max(s, ti.max(tk, tau[l]))
+                    gap = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box,
+                                       periodic).norm() - rk - radius[l]
+                    dv = (vel[l] - vk).norm()
+                    # F >= s exactly; the max keeps round-off from putting it below.
+                    arrival = ti.max(s, (ti.max(gap, 0.0) + dv * t0 + two_v * s) / (dv + two_v))
+                    if arrival < dk:
+                        dk = arrival
         if dk < d[k]:
             d[k] = dk
             changed += 1

@@ -75,13 +75,12 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
                 free = True
                 for row, seg in ti.ndrange(rows, segs):
                     k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-                    if k_lo < k_hi:
-                        for m in range(k_lo, k_hi):
-                            j = sorted_ids[m]
-                            s = (r + ti.cast(radius[j], ti.f64)) * (1.0 + CLEARANCE)
-                            d = displacement(x, ti.cast(pos[j], ti.f64), box, periodic)
-                            if d.dot(d) < s * s:
-                                free = False
+                    for m in range(k_lo, k_hi):
+                        j = sorted_ids[m]
+                        s = (r + ti.cast(radius[j], ti.f64)) * (1.0 + CLEARANCE)
+                        d = displacement(x, ti.cast(pos[j], ti.f64), box, periodic)
+                        if d.dot(d) < s * s:
+                            free = False
                 if free:
                     pos[i] = x
                     proposing[i] = 1
@@ -101,14 +100,13 @@ def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of:
             xi = ti.cast(pos[i], ti.f64)
             for row, seg in ti.ndrange(rows, segs):
                 k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-                if k_lo < k_hi:
-                    for m in range(k_lo, k_hi):
-                        j = sorted_ids[m]
-                        if j < i:
-                            s = ti.cast(radius[i] + radius[j], ti.f64) * (1.0 + CLEARANCE)
-                            d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic)
-                            if d.dot(d) < s * s:
-                                ok = False
+                for m in range(k_lo, k_hi):
+                    j = sorted_ids[m]
+                    if j < i:
+                        s = ti.cast(radius[i] + radius[j], ti.f64) * (1.0 + CLEARANCE)
+                        d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic)
+                        if d.dot(d) < s * s:
+                            ok = False
             if ok:
                 placed[i] = 1
                 accepted += 1
@@ -245,14 +243,13 @@ def _grow_limits(pos: ndarr, radius: ndarr, target: ndarr, new_radius: ndarr, ce
         c = cell_of[i]
         for row, seg in ti.ndrange(rows, segs):
             k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-            if k_lo < k_hi:
-                for m in range(k_lo, k_hi):
-                    j = sorted_ids[m]
-                    if j != i:
-                        d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
-                        gap = d - ri - ti.cast(radius[j], ti.f64)
-                        # Half the gap each, less a clearance so round-off never closes it.
-                        allowed = ti.min(allowed, ri + 0.5 * gap * (1.0 - 1e-6))
+            for m in range(k_lo, k_hi):
+                j = sorted_ids[m]
+                if j != i:
+                    d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
+                    gap = d - ri - ti.cast(radius[j], ti.f64)
+                    # Half the gap each, less a clearance so round-off never closes it.
+                    allowed = ti.min(allowed, ri + 0.5 * gap * (1.0 - 1e-6))
         grown = ti.max(ri, allowed)
         new_radius[i] = ti.cast(grown, real)
         if grown < target[i]:

@@ -46,14 +46,13 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
         xi = ti.cast(pos[i], ti.f64)
         for row, seg in ti.ndrange(rows, segs):
             k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-            if k_lo < k_hi:
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j > i:
-                        s = ti.cast(radius[i] + radius[j], ti.f64)
-                        d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
-                        if d < s:
-                            ti.atomic_max(out[0], (s - d) / s)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if j > i:
+                    s = ti.cast(radius[i] + radius[j], ti.f64)
+                    d = displacement(xi, ti.cast(pos[j], ti.f64), box, periodic).norm()
+                    if d < s:
+                        ti.atomic_max(out[0], (s - d) / s)
     return out[0]
 
 

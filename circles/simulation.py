@@ -15,8 +15,7 @@ import taichi as ti
 
 from . import discrete, event, placement, reductions
 from .backend import ensure_init
-from .geometry import NEVER
-from .geometry import spans
+from .geometry import NEVER, spans
 from .grid import Grid
 from .scene import (DENSEST_PACKING, BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
