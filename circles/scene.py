@@ -33,6 +33,17 @@ def _choice(name, value, allowed):
     return value
 
 
+def read_scene_toml(path) -> dict:
+    """The top-level tables of a scene file, without its [run] table (that is for the command line)."""
+    with open(path, "rb") as f:
+        try:
+            data = tomllib.load(f)
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{path}: not valid TOML ({e})") from None
+    data.pop("run", None)
+    return data
+
+
 def check_box(box):
     try:
         w, h = box
@@ -174,10 +185,4 @@ class Scene:
         A file that lists its circles ([[circle]] entries) is refused with a ValueError: read it
         with `circles.scenefile.read_circle_list`.
         """
-        with open(path, "rb") as f:
-            try:
-                d = tomllib.load(f)
-            except tomllib.TOMLDecodeError as e:
-                raise ValueError(f"{path}: not valid TOML ({e})") from None
-        d.pop("run", None)
-        return cls.from_dict(d)
+        return cls.from_dict(read_scene_toml(path))

@@ -22,13 +22,13 @@ return a `CircleList` whose fields are the arguments of ``circles.Simulation.fro
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from numbers import Real
 
 import numpy as np
 
-from .scene import BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_box, check_dt
+from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_box, check_dt,
+                    read_scene_toml)
 
 #: The table name of one circle in a scene file: ``[[circle]]``.
 CIRCLE_KEY = "circle"
@@ -79,12 +79,7 @@ def read_circle_list(path) -> CircleList:
     invalid TOML, a file without ``[[circle]]`` entries, and anything
     `circle_list_from_dict` refuses.
     """
-    with open(path, "rb") as file:
-        try:
-            data = tomllib.load(file)
-        except tomllib.TOMLDecodeError as error:
-            raise ValueError(f"{path}: not valid TOML ({error})") from None
-    data.pop("run", None)
+    data = read_scene_toml(path)
     if not lists_circles(data):
         raise ValueError(f"{path}: no [[circle]] entries: it describes a random scene, read it "
                          "with circles.Scene.from_toml")
