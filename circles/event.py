@@ -59,10 +59,17 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
 
 @ti.func
 def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ids: ti.template(),
-             ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), cell_of: ti.template(),
-             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, t_end,
-             scalars: ti.template(), real: ti.template(), periodic: ti.template()):
-    """Each dirty circle finds its earliest event; scalars[0] = the earliest event of all."""
+             ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), moved: ti.template(),
+             cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
+             box_h, t_end, scalars: ti.template(), real: ti.template(), periodic: ti.template()):
+    """Each dirty circle finds its earliest event; scalars[0] = the earliest event of all.
+
+    A circle that moved in the last round (or at the start of a step: all did), or whose
+    partner did, searches all its neighbours. Any other dirty circle keeps its event, which
+    is the earliest over neighbours whose paths have not changed, and compares it only with
+    its pairs with the circles that moved: the same minimum as a full search, with the same
+    arithmetic per pair, for a fraction of the work.
+    """
     scalars[0] = ti.cast(NEVER, real)
     n = pos.shape[0]
     box = ti.Vector([box_w, box_h], dt=real)
@@ -75,27 +82,39 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             best_lo = n + 8
             best_hi = n + 8
             best_p = NO_EVENT
+            old_p = ev_p[i]
+            full = moved[i] != 0 or (old_p >= 0 and moved[old_p] != 0)
+            if not full:
+                best_t = ev_t[i]
+                best_p = old_p
+                if old_p >= 0:
+                    best_lo = ti.min(ids[i], ids[old_p])
+                    best_hi = ti.max(ids[i], ids[old_p])
+                elif old_p != NO_EVENT:
+                    best_lo = ids[i]
+                    best_hi = n + (-1 - old_p)
             if ti.static(not periodic):
-                xi = pos[i]
-                vi = vel[i]
-                ri = radius[i]
-                for axis in ti.static(range(2)):
-                    t = ti.cast(NEVER, real)
-                    w = 0
-                    if vi[axis] < 0:
-                        t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
-                        w = 2 * axis
-                    elif vi[axis] > 0:
-                        t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
-                        w = 2 * axis + 1
-                    if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
-                        best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
+                if full:  # the wall events of a circle that did not move stand
+                    xi = pos[i]
+                    vi = vel[i]
+                    ri = radius[i]
+                    for axis in ti.static(range(2)):
+                        t = ti.cast(NEVER, real)
+                        w = 0
+                        if vi[axis] < 0:
+                            t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
+                            w = 2 * axis
+                        elif vi[axis] > 0:
+                            t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
+                            w = 2 * axis + 1
+                        if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
+                            best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
             c = cell_of[i]
             for row, seg in ti.ndrange(rows, segs):
                 k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
-                    if j != i:
+                    if j != i and (full or moved[j] != 0):
                         lo = ti.min(i, j)
                         hi = ti.max(i, j)
                         t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
@@ -106,6 +125,8 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
                             best_t, best_lo, best_hi, best_p = t, klo, khi, j
             ev_t[i] = best_t
             ev_p[i] = best_p
+    for i in range(n):
+        moved[i] = 0
     for i in range(n):
         if ev_t[i] < scalars[0]:
             # Reading first leaves only the few new minima to the (contended) atomic.
@@ -210,15 +231,15 @@ def _sweeps(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: 
 
 @ti.kernel
 def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
-                dirty: ndarr, d: ndarr, active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
+                dirty: ndarr, moved: ndarr, d: ndarr, active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, scalars: ndarr, real: ti.template(),
                 periodic: ti.template()) -> ti.f64:
     """Predict, seed the bounds and run the first sweeps, in one launch (launches cost tens of
     microseconds each). Returns the earliest event time when the bounds have settled (no event
     in the step when it exceeds t_end), or -1 when more sweeps are needed."""
-    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
-             box_w, box_h, t_end, scalars, real, periodic)
+    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, moved, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+             segs, box_w, box_h, t_end, scalars, real, periodic)
     _seed_bounds(ev_t, d, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real, periodic)
     changed = _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
                       rows, segs, box_w, box_h, t_end, vlim, real, periodic)
@@ -240,8 +261,9 @@ def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
 @ti.kernel
 def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
                pos_b: ndarr, vel_b: ndarr, pair_count_b: ndarr, wall_count_b: ndarr, virial_b: ndarr,
-               wall_impulse_b: ndarr, dirty: ndarr, scalars: ndarr, real: ti.template()):
-    """Back up what a step changes (a cut step is redone from it), and mark every circle to predict."""
+               wall_impulse_b: ndarr, dirty: ndarr, moved: ndarr, scalars: ndarr, real: ti.template()):
+    """Back up what a step changes (a cut step is redone from it), and mark every circle to predict
+    in full."""
     for i in range(pos.shape[0]):
         pos_b[i] = pos[i]
         vel_b[i] = vel[i]
@@ -250,13 +272,14 @@ def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, vir
         virial_b[i] = virial[i]
         wall_impulse_b[i] = wall_impulse[i]
         dirty[i] = 1
+        moved[i] = 1
     scalars[0] = ti.cast(NEVER, real)
     scalars[1] = ti.cast(NEVER, real)
 
 
 @ti.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
-            bound_t: ndarr, dirty: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
+            bound_t: ndarr, dirty: ndarr, moved: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
             cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, t_offset: ti.f64, scalars: ndarr, counters: ndarr,
             log_t: ndarr, log_i: ndarr, log_j: ndarr,
@@ -287,6 +310,7 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     pos[i] = x
                     vel[i] = v
                     tau[i] = e
+                    moved[i] = 1
                     wall_count[i] = wall_count[i] + 1
                     wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
@@ -341,6 +365,8 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                     vel[j] = vj
                     tau[i] = e
                     tau[j] = e
+                    moved[i] = 1
+                    moved[j] = 1
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     mark_neighbours_dirty(j, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     if counters[0] == 0:

@@ -240,6 +240,7 @@ class Simulation:
         self._ev_t = ti.ndarray(real, shape=n)
         self._ev_p = ti.ndarray(ti.i32, shape=n)
         self._dirty = ti.ndarray(ti.i32, shape=n)
+        self._moved = ti.ndarray(ti.i32, shape=n)
         self._d1 = ti.ndarray(real, shape=n)
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
@@ -432,13 +433,13 @@ class Simulation:
         b = self._backup
         event.begin_step(self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
                          b["pos"], b["vel"], b["pair_count"], b["wall_count"], b["virial"], b["wall_impulse"],
-                         self._dirty, self._scalars, real)
+                         self._dirty, self._moved, self._scalars, real)
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
         sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
         while True:
             tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                     self._dirty, self._d1, *self._active, *g, w, hgt, t_end, vlim, self._scalars,
+                                     self._dirty, self._moved, self._d1, *self._active, *g, w, hgt, t_end, vlim, self._scalars,
                                      real, periodic)
             if tmin > t_end:
                 break
@@ -452,7 +453,7 @@ class Simulation:
                     raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
             self.sweeps += sweeps
             executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
-                                     self._ev_p, self._d1, self._dirty, self.pair_count, self.wall_count,
+                                     self._ev_p, self._d1, self._dirty, self._moved, self.pair_count, self.wall_count,
                                      self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
                                      self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
                                      periodic, record)
@@ -464,6 +465,7 @@ class Simulation:
                     reductions.copy_vec(arr, getattr(self, name))
                 reductions.fill_real(self.tau, 0.0)
                 reductions.fill_i32(self._dirty, 1)
+                reductions.fill_i32(self._moved, 1)
                 if record:
                     self._set_counter(1, log_count)
                 self._set_scalars(NEVER, NEVER)
