@@ -8,36 +8,131 @@ approach speed, ties by ids), and mutual picks are resolved together. The pair w
 smallest key overall is always mutual, so each round resolves at least one pair. After the
 first round only circles overlapping a resolved circle pick again; the others' picks still hold.
 
+What a step touches: every circle once to move and once to sort into the grid and search the
+forward half of its neighbour cells for overlaps (each pair is tested once); the rounds visit
+only the circles that overlap something (the active list), and the walls only the circles
+the move left reaching past a wall.
+
 Known errors of the method, which the benchmark measures: a circle faster than about a
 diameter per step can pass through another (tunnelling), overlap is left behind, and
 collisions can be missed or counted twice.
 """
 import taichi as ti
 
-from .geometry import NEVER, displacement, key_less, neighbour_range
-from .grid import build_cells
+from .geometry import NEVER, displacement, forward_fits, forward_parts, forward_range, key_less, neighbour_range
+from .grid import enter_cell, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
 
 
+#: Slots of the `work` array: the round number, the lengths of the two work lists, and the
+#: number of circles reaching past a wall.
+ROUND, LIST0, LIST1, WALLED = 0, 1, 2, 3
+
+
 @ti.func
-def _move(pos: ti.template(), vel: ti.template(), dt, box_w, box_h, real: ti.template(), periodic: ti.template()):
+def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_contacts: ti.template(),
+          walled: ti.template(), work: ti.template(), cell_of: ti.template(), slot: ti.template(),
+          cell_count: ti.template(), ncx, ncy, inv_cw, inv_ch, dt, box_w, box_h, real: ti.template(),
+          periodic: ti.template()):
+    """x += v dt (wrapped into the box when periodic), counted into its grid cell; contact lists
+    emptied in the same pass.
+
+    In a walled box the circles that end up reaching past a wall are listed in `walled`
+    (work[WALLED] of them): only they can need a wall reflection at the end of the step.
+    """
     box = ti.Vector([box_w, box_h], dt=real)
     h = ti.cast(dt, real)
+    work[WALLED] = 0
     for i in range(pos.shape[0]):
+        n_contacts[i] = 0
         x = pos[i] + vel[i] * h
         if ti.static(periodic):
             x -= box * ti.floor(x / box)
             for a in ti.static(range(2)):
                 if x[a] >= box[a]:
                     x[a] -= box[a]
+        else:
+            r = radius[i]
+            if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
+                walled[ti.atomic_add(work[WALLED], 1)] = i
         pos[i] = x
+        enter_cell(i, x, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch)
+
+
+@ti.func
+def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.template(), side: ti.template()):
+    """Put k on the work list of round `rnd` (list `side`), once: marked[k] is the last round
+    k was listed for, and round numbers only grow."""
+    if marked[k] < rnd:
+        if ti.atomic_max(marked[k], rnd) < rnd:
+            lists[side, ti.atomic_add(work[LIST0 + side], 1)] = k
+
+
+@ti.func
+def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
+                    n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
+                    rnd, box, periodic: ti.template()):
+    """Add j to i's contact list and i to j's when the two overlap (the test `_consider` makes);
+    when they also approach, both go on the first round's work list."""
+    lo = ti.min(i, j)
+    hi = ti.max(i, j)
+    d = displacement(pos[lo], pos[hi], box, periodic)
+    s = radius[lo] + radius[hi]
+    if d.dot(d) < s * s:
+        # Other threads add to the same lists: atomic counts. The order in a list follows thread
+        # timing, which no pick depends on (keys break ties by ids); a count above the capacity
+        # sends the circle back to searching its cells.
+        a = ti.atomic_add(n_contacts[i], 1)
+        if a < contacts.shape[1]:
+            contacts[i, a] = j
+        b = ti.atomic_add(n_contacts[j], 1)
+        if b < contacts.shape[1]:
+            contacts[j, b] = i
+        # Approaching: the sign of the normal speed `_consider` divides by the distance. A pair
+        # whose quotient rounds to -0 is listed too; listing more circles changes no pick.
+        if (vel[hi] - vel[lo]).dot(d) < 0:
+            _enlist(i, rnd, marked, lists, work, 0)
+            _enlist(j, rnd, marked, lists, work, 0)
+
+
+@ti.func
+def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), slot: ti.template(),
+                   contacts: ti.template(), n_contacts: ti.template(), marked: ti.template(), lists: ti.template(),
+                   work: ti.template(), cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(),
+                   ncx, ncy, rows, segs, box_w, box_h, real: ti.template(), periodic: ti.template()):
+    """Fill the contact lists and the first work list: every overlapping pair, found once, from
+    the forward half of the cells of one of its circles (half the pair tests of a full 3 x 3
+    search). Contact lists start empty; this step's first round number is work[ROUND] + 1."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    forward = forward_fits(ncx, ncy, periodic)
+    work[ROUND] += 1
+    work[LIST0] = 0
+    for i in range(pos.shape[0]):
+        rnd = work[ROUND]
+        c = cell_of[i]
+        if forward:
+            own = cell_start[c] + slot[i]
+            for q in ti.static(range(forward_parts(periodic))):
+                k_lo, k_hi = forward_range(q, c, own, cell_start, ncx, ncy, periodic)
+                for k in range(k_lo, k_hi):
+                    _record_contact(i, sorted_ids[k], pos, vel, radius, contacts, n_contacts, marked, lists, work,
+                                    rnd, box, periodic)
+        else:
+            # A periodic grid under 3 cells wide: the full search, each pair from its lower index.
+            for row, seg in ti.ndrange(rows, segs):
+                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                for k in range(k_lo, k_hi):
+                    j = sorted_ids[k]
+                    if j > i:
+                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
+                                        periodic)
 
 
 @ti.func
 def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), box,
               best, best_lo, best_hi, best_p, periodic: ti.template()):
-    """The pick of i updated with its pair with j; returns (key, lo id, hi id, partner, overlapping)."""
+    """The pick of i updated with its pair with j; returns (key, lo id, hi id, partner)."""
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
@@ -54,41 +149,35 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
             khi = ti.max(ids[i], ids[j])
             if key_less(key, klo, khi, best, best_lo, best_hi):
                 best, best_lo, best_hi, best_p = key, klo, khi, j
-    return best, best_lo, best_hi, best_p, overlapping
+    return best, best_lo, best_hi, best_p
 
 
 @ti.func
 def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), partner: ti.template(),
-          key_t: ti.template(), dirty: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
-          cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
-          box_h, counters: ti.template(), real: ti.template(), periodic: ti.template(), scan: ti.template()):
-    """Each dirty circle picks its overlapping approaching pair of smallest key.
+          picked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+          lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+          sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, real: ti.template(),
+          periodic: ti.template(), side: ti.template()):
+    """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
-    With `scan` (the first round of a step) every circle searches its 3 x 3 cells and keeps
-    its overlapping neighbours in `contacts` (up to contacts.shape[1]; more is marked by
-    a count above that, and such a circle searches its cells again in later rounds). Later
-    rounds only look through the contact lists: positions do not change within a step.
+    The candidates are the circle's contact list (`_scan_contacts`): positions do not change
+    within a step. A circle with more contacts than the list holds searches its 3 x 3 cells.
+    Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
     n = pos.shape[0]
     cap = contacts.shape[1]
     box = ti.Vector([box_w, box_h], dt=real)
-    counters[0] = 0
-    for i in range(n):
-        # A circle keeps its pick unless a circle overlapping it was resolved (see resolve).
-        if dirty[i] == 0:
-            continue
-        dirty[i] = 0
+    for a in range(work[LIST0 + side]):
+        i = lists[side, a]
         best = ti.cast(NEVER, real)
         best_lo = n
         best_hi = n
         best_p = -1
         listed = n_contacts[i]
-        if ti.static(scan):
-            listed = 0
-        if not ti.static(scan) and listed <= cap:
+        if listed <= cap:
             for m in range(listed):
-                best, best_lo, best_hi, best_p, _ = _consider(i, contacts[i, m], pos, vel, radius, ids, box, best,
-                                                              best_lo, best_hi, best_p, periodic)
+                best, best_lo, best_hi, best_p = _consider(i, contacts[i, m], pos, vel, radius, ids, box, best,
+                                                           best_lo, best_hi, best_p, periodic)
         else:
             c = cell_of[i]
             for row, seg in ti.ndrange(rows, segs):
@@ -96,34 +185,27 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i:
-                        best, best_lo, best_hi, best_p, overlapping = _consider(
-                            i, j, pos, vel, radius, ids, box, best, best_lo, best_hi, best_p, periodic)
-                        if ti.static(scan):
-                            if overlapping:
-                                if listed < cap:
-                                    contacts[i, listed] = j
-                                listed += 1
-            if ti.static(scan):
-                n_contacts[i] = ti.min(listed, cap + 1)
+                        best, best_lo, best_hi, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_lo,
+                                                                   best_hi, best_p, periodic)
         partner[i] = best_p
-        key_t[i] = best
+        picked[i] = work[ROUND]
 
 
 @ti.func
-def mark_overlapping_dirty(i, pos: ti.template(), radius: ti.template(), dirty: ti.template(),
-                           contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
-                           cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
-                           periodic: ti.template()):
-    """Mark i and every circle overlapping it for a new pick.
+def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marked: ti.template(),
+                        lists: ti.template(), work: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+                        cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
+                        segs, box, periodic: ti.template(), side: ti.template()):
+    """List i and every circle overlapping it for a new pick in round `rnd`.
 
     Positions do not move between rounds, so only pairs with i can change their key when i's
     velocity changes, and only overlapping pairs have a key: other circles' picks still hold.
     """
-    dirty[i] = 1
+    _enlist(i, rnd, marked, lists, work, side)
     listed = n_contacts[i]
     if listed <= contacts.shape[1]:
         for m in range(listed):
-            dirty[contacts[i, m]] = 1
+            _enlist(contacts[i, m], rnd, marked, lists, work, side)
     else:
         c = cell_of[i]
         for row, seg in ti.ndrange(rows, segs):
@@ -133,19 +215,49 @@ def mark_overlapping_dirty(i, pos: ti.template(), radius: ti.template(), dirty: 
                 d = displacement(pos[i], pos[j], box, periodic)
                 s = radius[i] + radius[j]
                 if d.dot(d) < s * s:
-                    dirty[j] = 1
+                    _enlist(j, rnd, marked, lists, work, side)
+
+
+@ti.func
+def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(),
+                      partner: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
+                      contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
+                      cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
+                      real: ti.template(), periodic: ti.template(), side: ti.template()):
+    """x's velocity changed in its pair with y: list what must pick again in round `rnd`.
+
+    Most circles overlap only their partner. Such a circle's next pick is made here, from that
+    one pair (the same pick round `rnd` would make: no other circle's velocity it depends on
+    changes before then), and it is not listed; its partner lists what it overlaps.
+    """
+    if n_contacts[x] == 1:
+        n = pos.shape[0]
+        _, _, _, p = _consider(x, y, pos, vel, radius, ids, box, ti.cast(NEVER, real), n, n, -1, periodic)
+        partner[x] = p
+    else:
+        _enlist_overlapping(x, rnd, pos, radius, marked, lists, work, contacts, n_contacts, cell_of, cell_start,
+                            sorted_ids, ncx, ncy, rows, segs, box, periodic, side)
 
 
 @ti.func
 def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-             ids: ti.template(), partner: ti.template(), pair_count: ti.template(), virial: ti.template(),
-             dirty: ti.template(), contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
-             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-             counters: ti.template(), real: ti.template(), periodic: ti.template()):
+             ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+             virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+             lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+             sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, counters: ti.template(),
+             real: ti.template(), periodic: ti.template(), side: ti.template()):
+    """Resolve the mutual approaching picks that involve a circle of this round's list, and list
+    the circles whose picks that changes for the next round (the other list)."""
     box = ti.Vector([box_w, box_h], dt=real)
-    for i in range(pos.shape[0]):
+    counters[0] = 0
+    work[LIST0 + 1 - side] = 0
+    for a in range(work[LIST0 + side]):
+        rnd = work[ROUND]
+        i = lists[side, a]
         j = partner[i]
-        if j > i and partner[j] == i:
+        # A mutual pair is resolved by its lower index when both picked this round, else by the
+        # one that did (the other's pick is older and still holds).
+        if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
             d = displacement(pos[i], pos[j], box, periodic)
             nrm = d.normalized()
             vn = (vel[j] - vel[i]).dot(nrm)
@@ -164,84 +276,129 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
                     # "Something was resolved": a plain store, read first so the shared cache line
                     # is written once, not bounced between cores for every pair.
                     counters[0] = 1
-                mark_overlapping_dirty(i, pos, radius, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
-                                       ncx, ncy, rows, segs, box, periodic)
-                mark_overlapping_dirty(j, pos, radius, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
-                                       ncx, ncy, rows, segs, box, periodic)
+                _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
+                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
+                                  periodic, 1 - side)
+                _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
+                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
+                                  periodic, 1 - side)
+    work[ROUND] += 1
+
+
+@ti.func
+def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+          wall_count: ti.template(), wall_impulse: ti.template(), box):
+    """Reflect circle i off the walls it reaches past: mirror the position, and flip the normal
+    velocity when it points outwards."""
+    x = pos[i]
+    v = vel[i]
+    r = radius[i]
+    for a in ti.static(range(2)):
+        lo = r
+        hi = box[a] - r
+        hit = False
+        if x[a] < lo:
+            x[a] = ti.min(2 * lo - x[a], hi)
+            hit = v[a] < 0
+            if hit:
+                v[a] = -v[a]
+        elif x[a] > hi:
+            x[a] = ti.max(2 * hi - x[a], lo)
+            hit = v[a] > 0
+            if hit:
+                v[a] = -v[a]
+        if hit:
+            wall_count[i] = wall_count[i] + 1
+            wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+    pos[i] = x
+    vel[i] = v
+
+
+@ti.func
+def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+           wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), counters: ti.template(),
+           box_w, box_h, real: ti.template(), settled_only: ti.template()):
+    """The wall reflections of the listed circles; with `settled_only`, only when the last round
+    resolved no pair (the rounds are over; otherwise more rounds come first)."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    for k in range(counters[3]):
+        if not ti.static(settled_only) or counters[0] == 0:
+            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
+
+
+@ti.func
+def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+           wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), work: ti.template(),
+           counters: ti.template(), box_w, box_h, real: ti.template(), settled_only: ti.template()):
+    """The wall reflections of the listed circles; with `settled_only`, only when the last round
+    resolved no pair (the rounds are over; otherwise more rounds come first)."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    for k in range(work[WALLED]):
+        if not ti.static(settled_only) or counters[0] == 0:
+            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
 
 
 @ti.kernel
 def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: ndarr, wall_impulse: ndarr,
-          box_w: ti.f64, box_h: ti.f64, real: ti.template()):
-    box = ti.Vector([box_w, box_h], dt=real)
-    for i in range(pos.shape[0]):
-        x = pos[i]
-        v = vel[i]
-        r = radius[i]
-        for a in ti.static(range(2)):
-            lo = r
-            hi = box[a] - r
-            hit = False
-            if x[a] < lo:
-                x[a] = ti.min(2 * lo - x[a], hi)
-                hit = v[a] < 0
-                if hit:
-                    v[a] = -v[a]
-            elif x[a] > hi:
-                x[a] = ti.max(2 * hi - x[a], lo)
-                hit = v[a] > 0
-                if hit:
-                    v[a] = -v[a]
-            if hit:
-                wall_count[i] = wall_count[i] + 1
-                wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
-        pos[i] = x
-        vel[i] = v
+          walled: ndarr, work: ndarr, counters: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
+    """The wall reflections after rounds that stopped at the round limit."""
+    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, False)
 
 
 @ti.func
 def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-            ids: ti.template(), partner: ti.template(), key_t: ti.template(), dirty: ti.template(),
-            contacts: ti.template(), n_contacts: ti.template(), pair_count: ti.template(), virial: ti.template(),
-            cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
-            box_w, box_h, counters: ti.template(), real: ti.template(), periodic: ti.template(),
-            rounds: ti.template(), first_scans: ti.template()):
-    """`rounds` rounds of pick and resolve as top-level loops; a round after one that resolved
-    nothing finds no dirty circle and no mutual approaching pick, so it changes nothing."""
+            ids: ti.template(), partner: ti.template(), picked: ti.template(),
+            marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(), lists: ti.template(),
+            work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
+            cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+            counters: ti.template(), real: ti.template(), periodic: ti.template(), rounds: ti.template()):
+    """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
+    lists (`rounds` is even, so every launch starts on list 0); a round after one that
+    resolved nothing has an empty list, so it costs two empty loops."""
     for r in ti.static(range(rounds)):
-        _pick(pos, vel, radius, ids, partner, key_t, dirty, contacts, n_contacts, cell_of, cell_start, sorted_ids,
-              ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, ti.static(first_scans and r == 0))
-        _resolve(pos, vel, radius, inv_mass, ids, partner, pair_count, virial, dirty, contacts, n_contacts,
-                 cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic)
+        _pick(pos, vel, radius, ids, partner, picked, contacts, n_contacts, lists, work, cell_of, cell_start,
+              sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic, r % 2)
+        _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
+                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
+                 periodic, r % 2)
 
 
 @ti.kernel
-def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr,
-               dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, pair_count: ndarr,
-               virial: ndarr, mask: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
+def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
+               marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
+               lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
+               wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
                segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
                periodic: ti.template(), rounds: ti.template()) -> ti.i32:
-    """Move, grid and the first `rounds` rounds of pair resolution, in one launch (launches cost
-    tens of microseconds each, which is the whole step for a few thousand circles). Returns 1
-    when the last round resolved a pair (more rounds may be needed), else 0."""
-    _move(pos, vel, dt, box_w, box_h, real, periodic)
-    build_cells(pos, mask, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, False)
-    for i in range(pos.shape[0]):
-        dirty[i] = 1
-    _rounds(pos, vel, radius, inv_mass, ids, partner, key_t, dirty, contacts, n_contacts, pair_count, virial,
-            cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, rounds,
-            True)
+    """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
+    in one launch (launches cost tens of microseconds each, which is the whole step for a few
+    thousand circles). Returns 1 when the last round resolved a pair (more rounds may be
+    needed; the walls wait for them), else 0."""
+    _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
+          box_w, box_h, real, periodic)
+    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
+    _scan_contacts(pos, vel, radius, slot, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
+                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
+    _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
+            periodic, rounds)
+    if ti.static(not periodic):
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, True)
     return counters[0]
 
 
 @ti.kernel
-def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, key_t: ndarr,
-                dirty: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr, pair_count: ndarr,
-                virial: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
-                periodic: ti.template(), rounds: ti.template()) -> ti.i32:
-    _rounds(pos, vel, radius, inv_mass, ids, partner, key_t, dirty, contacts, n_contacts, pair_count, virial,
-            cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real, periodic, rounds,
-            False)
+def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
+                marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
+                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
+                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr,
+                real: ti.template(), periodic: ti.template(), rounds: ti.template()) -> ti.i32:
+    """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
+    _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
+            periodic, rounds)
+    if ti.static(not periodic):
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, True)
     return counters[0]

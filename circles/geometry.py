@@ -80,6 +80,51 @@ def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: 
     return cell_start[lo], cell_start[hi]
 
 
+@ti.func
+def forward_range(q, c, own, cell_start: ti.template(), ncx, ncy, periodic: ti.template()):
+    """Slots [k_lo, k_hi) of part `q` of the forward half of the 3 x 3 cells around c.
+
+    The forward half of the circle in slot `own` of cell c: the later slots of c, the cell to
+    its right and the three cells of the row above. Each pair of circles in neighbouring
+    cells lies in the forward half of exactly one of its two circles, so a search over the
+    forward halves sees every pair once. Parts: 2 in a walled box (the own row is one run),
+    4 in a periodic box (own cell, right cell, and the row above in up to two runs), where it
+    needs at least 3 cells along each axis (`forward_fits`).
+    """
+    cx = c % ncx
+    cy = c // ncx
+    lo = own + 1
+    hi = own + 1
+    if ti.static(periodic):
+        if q == 0:
+            hi = cell_start[c + 1]
+        elif q == 1:
+            right = cy * ncx + (cx + 1) % ncx
+            lo, hi = cell_start[right], cell_start[right + 1]
+        else:
+            lo, hi = neighbour_range(c, 2, q - 2, cell_start, ncx, ncy, periodic)
+    else:
+        if q == 0:
+            hi = cell_start[cy * ncx + ti.min(cx + 2, ncx)]
+        else:
+            lo, hi = neighbour_range(c, 2, 0, cell_start, ncx, ncy, periodic)
+    return lo, hi
+
+
+def forward_parts(periodic: bool) -> int:
+    """The number of parts of `forward_range`."""
+    return 4 if periodic else 2
+
+
+@ti.func
+def forward_fits(ncx, ncy, periodic: ti.template()):
+    """Whether `forward_range` covers each neighbouring pair once on this grid."""
+    fits = True
+    if ti.static(periodic):
+        fits = ncx >= 3 and ncy >= 3
+    return fits
+
+
 def spans(ncx: int, ncy: int, periodic: bool):
     """(rows, segs): the loop bounds of `neighbour_range` for a grid of ncx x ncy cells."""
     if not periodic:

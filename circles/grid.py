@@ -18,38 +18,89 @@ import taichi as ti
 from .geometry import spans
 
 
+#: Cells per chunk of the prefix sum: chunks are summed in parallel, the chunk sums serially.
+PREFIX_CHUNK = 2048
+
+
 @ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
                 inv_ch, masked: ti.template()):
-    """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel."""
-    for c in range(ncx * ncy):
-        cell_count[c] = 0
+    """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel.
+
+    `cell_count` must be all zero on entry; it is left all zero (each chunk clears its counts
+    once it has turned them into starts), so no pass clears it.
+    """
     for i in range(pos.shape[0]):
         use = True
         if ti.static(masked):
             use = include[i] != 0
         if use:
-            p = pos[i]
-            # Positions may sit a round-off outside the box (or outside [0, W) in a
-            # periodic box before wrapping): clamp and wrap the cell coordinates.
-            cx = ti.cast(ti.floor(ti.cast(p[0], ti.f64) * inv_cw), ti.i32)
-            cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
-            cx = ti.min(ti.max(cx, 0), ncx - 1)
-            cy = ti.min(ti.max(cy, 0), ncy - 1)
-            c = cy * ncx + cx
-            cell_of[i] = c
-            slot[i] = ti.atomic_add(cell_count[c], 1)
+            enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch)
         else:
             cell_of[i] = -1
-    cell_start[0] = 0
-    ti.loop_config(serialize=True)
-    for c in range(ncx * ncy):
-        cell_start[c + 1] = cell_start[c] + cell_count[c]
+    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
+
+
+@ti.func
+def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), ncx, ncy, inv_cw,
+               inv_ch):
+    """Count circle i, at p, into its cell (the first stage, for a scheme to fuse into its own pass)."""
+    # Positions may sit a round-off outside the box (or outside [0, W) in a
+    # periodic box before wrapping): clamp and wrap the cell coordinates.
+    cx = ti.cast(ti.floor(ti.cast(p[0], ti.f64) * inv_cw), ti.i32)
+    cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
+    cx = ti.min(ti.max(cx, 0), ncx - 1)
+    cy = ti.min(ti.max(cy, 0), ncy - 1)
+    c = cy * ncx + cx
+    cell_of[i] = c
+    slot[i] = ti.atomic_add(cell_count[c], 1)
+
+
+@ti.func
+def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), cell_start: ti.template(),
+                 sorted_ids: ti.template(), ncx, ncy):
+    """The stages after counting: cell starts, then ids scattered into their slots."""
+    prefix_sum(cell_count, cell_start, ncx * ncy)
     for i in range(cell_of.shape[0]):
         c = cell_of[i]
         if c >= 0:
             sorted_ids[cell_start[c] + slot[i]] = i
+
+
+@ti.func
+def prefix_sum(count: ti.template(), start: ti.template(), ncells):
+    """start[c] = count[0] + ... + count[c - 1] for c <= ncells, and count[:ncells] set to 0.
+
+    Three passes: chunk sums in parallel (kept in start[c] at each chunk's end), their running
+    sum serially (one item per chunk), then each chunk's starts in parallel.
+    """
+    nchunks = (ncells + PREFIX_CHUNK - 1) // PREFIX_CHUNK
+    for b in range(nchunks):
+        lo = b * PREFIX_CHUNK
+        hi = ti.min(lo + PREFIX_CHUNK, ncells)
+        total = 0
+        for c in range(lo, hi):
+            total += count[c]
+        start[hi] = total
+    ti.loop_config(serialize=True)
+    for b in range(nchunks):
+        # start[hi of b] becomes the total of chunks 0..b; start[0] = 0.
+        hi = ti.min((b + 1) * PREFIX_CHUNK, ncells)
+        before = 0
+        if b > 0:
+            before = start[b * PREFIX_CHUNK]
+        start[hi] = before + start[hi]
+    start[0] = 0
+    for b in range(nchunks):
+        lo = b * PREFIX_CHUNK
+        hi = ti.min(lo + PREFIX_CHUNK, ncells)
+        running = start[lo]
+        for c in range(lo, hi - 1):
+            running += count[c]
+            start[c + 1] = running
+            count[c] = 0
+        count[hi - 1] = 0
 
 
 @ti.kernel
@@ -72,6 +123,7 @@ class Grid:
         self.slot = ti.ndarray(ti.i32, shape=n)
         self.sorted_ids = ti.ndarray(ti.i32, shape=n)
         self.cell_count = ti.ndarray(ti.i32, shape=self.max_cells)
+        self.cell_count.fill(0)
         self.cell_start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
         self._dummy_mask = ti.ndarray(ti.i32, shape=1)
         self.ncx = self.ncy = 1

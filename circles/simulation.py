@@ -29,8 +29,10 @@ EVENT_STEP_RADII = 0.3
 DISCRETE_STEP_FRACTION = 0.2
 #: Rounds of pair resolution per discrete step; what is left stays for the next step.
 DISCRETE_MAX_ROUNDS = 16
-#: Rounds run in the same launch as the move and the grid (more follow only when needed).
-DISCRETE_FUSED_ROUNDS = 4
+#: Rounds run in the same launch as the move and the grid (more follow only when needed); even,
+#: as the rounds alternate between two work lists. Rounds after the last busy one cost two
+#: empty loops each, far less than a launch.
+DISCRETE_FUSED_ROUNDS = 8
 #: A lattice start is melted until circles have had this many collisions each on average.
 MELT_COLLISIONS_PER_CIRCLE = 10
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
@@ -225,11 +227,15 @@ class Simulation:
             self._alloc_event_arrays()
         if scheme == "discrete":
             self._partner = ti.ndarray(ti.i32, shape=n)
-            if not self._event_arrays:
-                self._dirty = ti.ndarray(ti.i32, shape=n)
-            self._key = ti.ndarray(real, shape=n)
+            self._picked = ti.ndarray(ti.i32, shape=n)
+            self._marked = ti.ndarray(ti.i32, shape=n)
             self._contacts = ti.ndarray(ti.i32, shape=(n, DISCRETE_CONTACTS))
             self._n_contacts = ti.ndarray(ti.i32, shape=n)
+            self._work_lists = ti.ndarray(ti.i32, shape=(2, n))
+            self._work = ti.ndarray(ti.i32, shape=4)
+            self._walled = ti.ndarray(ti.i32, shape=n)
+            for arr in (self._picked, self._marked, self._work):
+                reductions.fill_i32(arr, 0)
 
     def _alloc_event_arrays(self):
         if self._event_arrays:
@@ -481,11 +487,12 @@ class Simulation:
     def _discrete_step(self, h):
         w, hgt = self.box
         real, periodic = self._real, self.periodic
-        mask, *cells = self.grid.prepare(2.0 * self._rmax)
+        _, *cells = self.grid.prepare(2.0 * self._rmax)
         rows, segs = spans(self.grid.ncx, self.grid.ncy, periodic)
-        arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._key, self._dirty,
-                  self._contacts, self._n_contacts, self.pair_count, self.virial)
-        busy = discrete.begin_step(*arrays, mask, *cells, rows, segs, h, w, hgt, self._counters, real, periodic,
+        arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._picked,
+                  self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
+                  self.virial, self.wall_count, self.wall_impulse, self._walled)
+        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._counters, real, periodic,
                                    DISCRETE_FUSED_ROUNDS)
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether the last one resolved a pair.
@@ -494,9 +501,10 @@ class Simulation:
             busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._counters, real, periodic, more)
             done += more
         self.rounds += done
-        if not periodic:
+        if busy and not periodic:
+            # The round limit was reached: the walls were left for rounds that did not come.
             discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
-                           w, hgt, real)
+                           self._walled, self._work, self._counters, w, hgt, real)
         return h
 
     def _set_scalars(self, a, b):
