@@ -31,18 +31,26 @@ overlap (sum above one) their colours are averaged by coverage.
 
 The image is drawn in 16 x 16 pixel tiles, in four stages (kernels):
 
-1. ``_count_tile_entries``: count the circles touching each tile;
-2. ``_tile_offsets``: prefix sum of the counts, the start of each tile's entries;
-3. ``_bin_circles``: write each circle's image centre, radius and colour into the entries
-   of every tile it touches (usually one);
-4. ``_draw_tiles``: one thread draws a tile's entries into a scratch tile that stays in
-   cache, then composites the tile's pixels into the image; no pixel has two writers,
-   so there are no atomics on pixels and the image is written once.
+1. count the entries (circle copies) of each tile;
+2. prefix sum of the counts: the start of each tile's entries;
+3. write each circle's image centre, radius and colour into the entries of every tile it
+   touches (usually one);
+4. ``_draw_tiles``: draw a tile's entries into a scratch tile that stays in cache, then
+   composite the tile's pixels into the image; no pixel has two writers, so there are no
+   atomics on pixels and the image is written once.
+
+Stages 1 to 3 differ by device. On a GPU (``_count_tile_entries``, ``_tile_offsets``,
+``_bin_circles``) a thread takes a circle and counts and places with atomics. On a CPU
+(``_count_chunk_entries``, ``_chunk_offsets``, ``_bin_chunk_circles``) the circles are cut
+into a few chunks per thread, each with its own row of counts and cursors, so that plain
+increments do: an atomic costs more there than the rest of a circle's work. On a CPU the
+few large pieces of work (chunks, rows of tiles) go to one worker per thread (see
+``_CPU_BLOCK``).
 
 All kernels take Taichi ndarrays, so they compile once per dtype and colour mode, not per
 array size; the working arrays are ``ti.ndarray`` kept between calls of the same image
-size. The same kernels run on CPU and GPU. Nothing here calls ``ti.init``: the caller does
-(``circles.init()``).
+size. The GPU stages also run on a CPU, where the tests compare their image with the CPU
+stages'. Nothing here calls ``ti.init``: the caller does (``circles.init()``).
 """
 
 import math
@@ -140,6 +148,46 @@ def _image_centre(wx: ti.f32, wy: ti.f32, shift: ti.template(), view: ti.math.ve
 _SHIFTS = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1))
 
 
+# Taichi 1.7 runs a parallel loop on a CPU as one contiguous block of iterations per
+# thread, each block at least this long: a loop over fewer than this many items per thread
+# leaves threads idle (a loop over the 68 rows of tiles of a 1080-row image runs on one
+# thread). Work that comes in a few large pieces (chunks of circles, rows of tiles) is
+# therefore run by a loop of this many iterations per worker, the first iteration of each
+# block being a worker: it takes pieces from a shared counter until none is left, so a
+# thread slowed by other work takes fewer. Were the blocks laid out otherwise, the image
+# would be the same, only drawn by fewer threads.
+_CPU_BLOCK = 512
+
+
+@ti.func
+def _chunk_begin(c: ti.i32, n: ti.i32, chunks: ti.i32) -> ti.i32:
+    """First circle of chunk ``c`` when ``n`` circles are cut into ``chunks`` equal ranges."""
+    return ti.cast(ti.i64(n) * c // chunks, ti.i32)
+
+
+@ti.func
+def _packed_colour(i: ti.i32, vel: ti.template(), color: ti.template(), colormap: ti.template(),
+                   speed_mode: ti.template(), inv_speed_scale: ti.f32) -> ti.f32:
+    """Circle ``i``'s colour, its three bytes packed into the bits of an f32 (an entry's
+    fourth number)."""
+    rgb = ti.math.ivec3(0)
+    if ti.static(speed_mode):
+        vx = ti.cast(vel[i, 0], ti.f32)
+        vy = ti.cast(vel[i, 1], ti.f32)
+        n_colors = colormap.shape[0]
+        u = ti.math.clamp(ti.sqrt(vx * vx + vy * vy) * inv_speed_scale, 0.0, 1.0) \
+            * (n_colors - 1)
+        k = ti.min(ti.cast(u, ti.i32), n_colors - 2)
+        f = u - k
+        for c in ti.static(range(3)):
+            rgb[c] = ti.cast((1.0 - f) * colormap[k, c] + f * colormap[k + 1, c] + 0.5,
+                             ti.i32)
+    else:
+        for c in ti.static(range(3)):
+            rgb[c] = ti.cast(color[i, c], ti.i32)
+    return ti.bit_cast(rgb[0] | (rgb[1] << 8) | (rgb[2] << 16), ti.f32)
+
+
 @ti.kernel
 def _count_tile_entries(
     pos: ti.types.ndarray(ndim=2),
@@ -152,7 +200,7 @@ def _count_tile_entries(
     tiles_x: ti.i32,
     periodic: ti.template(),
 ):
-    """Stage 1: how many circles (periodic copies included) touch each tile.
+    """Stage 1 (GPU): how many circles (periodic copies included) touch each tile.
 
     Most circles lie within one tile: those count in ``tile_count[t, 0]`` and keep their
     rank among them, so stage 3 places them without atomics (an atomic between scattered
@@ -178,7 +226,7 @@ def _count_tile_entries(
 @ti.kernel
 def _tile_offsets(tile_count: ti.types.ndarray(ndim=2), tile_start: ti.types.ndarray(ndim=1),
                   tile_cursor: ti.types.ndarray(ndim=1)) -> ti.i64:
-    """Stage 2: each tile's first entry (exclusive prefix sum of the counts) and the
+    """Stage 2 (GPU): each tile's first entry (exclusive prefix sum of the counts) and the
     cursor where its entries without a rank go; zeroes the counts for the next call.
 
     Returns the number of entries. Serial: there are only a few thousand tiles."""
@@ -213,29 +261,14 @@ def _bin_circles(
     tiles_x: ti.i32,
     periodic: ti.template(),
 ):
-    """Stage 3: write each circle's image centre, radius and colour into every tile it
-    touches, so that stage 4 reads each tile's circles contiguously."""
+    """Stage 3 (GPU): write each circle's image centre, radius and colour into every tile
+    it touches, so that stage 4 reads each tile's circles contiguously."""
     for i in range(radius.shape[0]):
         r = ti.cast(radius[i], ti.f32) * view[0]
         reach = _reach(r)
         wx = ti.cast(pos[i, 0], ti.f32)
         wy = ti.cast(pos[i, 1], ti.f32)
-        rgb = ti.math.ivec3(0)
-        if ti.static(speed_mode):
-            vx = ti.cast(vel[i, 0], ti.f32)
-            vy = ti.cast(vel[i, 1], ti.f32)
-            n_colors = colormap.shape[0]
-            u = ti.math.clamp(ti.sqrt(vx * vx + vy * vy) * inv_speed_scale, 0.0, 1.0) \
-                * (n_colors - 1)
-            k = ti.min(ti.cast(u, ti.i32), n_colors - 2)
-            f = u - k
-            for c in ti.static(range(3)):
-                rgb[c] = ti.cast((1.0 - f) * colormap[k, c] + f * colormap[k + 1, c] + 0.5,
-                                 ti.i32)
-        else:
-            for c in ti.static(range(3)):
-                rgb[c] = ti.cast(color[i, c], ti.i32)
-        packed_rgb = ti.bit_cast(rgb[0] | (rgb[1] << 8) | (rgb[2] << 16), ti.f32)
+        packed_rgb = _packed_colour(i, vel, color, colormap, speed_mode, inv_speed_scale)
         for s in ti.static(range(9 if periodic else 1)):
             centre = _image_centre(wx, wy, _SHIFTS[s], view, box)
             tiles = _tile_range(_pixel_range(centre[0], centre[1], reach, clip))
@@ -250,19 +283,169 @@ def _bin_circles(
                     entries[slot] = ti.math.vec4(centre, r, packed_rgb)
 
 
-@ti.func
-def _add(scratch: ti.template(), slot: ti.i32, x: ti.i32, y: ti.i32, coverage: ti.f32,
-         rgb: ti.math.ivec3):
-    # The slot is owned by one thread: a plain read-modify-write, no atomics.
-    weight = ti.cast(coverage * _COVERAGE_ONE + 0.5, ti.i32)
-    scratch[slot, y, x] = scratch[slot, y, x] + ti.math.ivec4(rgb, 1) * weight
+@ti.kernel
+def _count_chunk_entries(
+    pos: ti.types.ndarray(ndim=1),
+    radius: ti.types.ndarray(ndim=1),
+    chunk_count: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    chunks: ti.i32,
+    only_tile: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    queue: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    workers: ti.i32,
+    view: ti.math.vec4,
+    box: ti.math.vec2,
+    clip: ti.math.ivec4,
+    tiles_x: ti.i32,
+    periodic: ti.template(),
+):
+    """Stage 1 (CPU): ``chunk_count[c * tiles + t]``, the entries (circle copies) that
+    chunk ``c`` of the circles puts into tile ``t``; ``only_tile[i]``, the one tile of
+    circle ``i`` when it has one entry, of the circle itself (most circles), else -1.
+
+    A chunk is a range of circles that one worker counts in the chunk's own row of
+    counts, with plain increments: no atomics, which on a CPU cost more than the rest of
+    the work. ``queue[0]`` hands out the chunks; it is zero before and after."""
+    n = radius.shape[0]
+    n_tiles = chunk_count.shape[0] // chunks
+    for w in range(workers * _CPU_BLOCK):
+        if w % _CPU_BLOCK == 0:
+            c = ti.atomic_add(queue[0], 1)
+            while c < chunks:
+                row = c * n_tiles
+                for t in range(n_tiles):
+                    chunk_count[row + t] = 0
+                for i in range(_chunk_begin(c, n, chunks), _chunk_begin(c + 1, n, chunks)):
+                    reach = _reach(ti.cast(radius[i], ti.f32) * view[0])
+                    wx = ti.cast(pos[2 * i], ti.f32)
+                    wy = ti.cast(pos[2 * i + 1], ti.f32)
+                    only = -1
+                    for s in ti.static(range(9 if periodic else 1)):
+                        centre = _image_centre(wx, wy, _SHIFTS[s], view, box)
+                        tiles = _tile_range(_pixel_range(centre[0], centre[1], reach, clip))
+                        if ti.static(s == 0):
+                            if tiles[0] + 1 == tiles[1] and tiles[2] + 1 == tiles[3]:
+                                only = tiles[2] * tiles_x + tiles[0]
+                                chunk_count[row + only] = chunk_count[row + only] + 1
+                                tiles[1] = tiles[0]  # counted: skip the loop below
+                        if tiles[0] < tiles[1]:
+                            # The tiles row by row in one loop: as two nested loops,
+                            # LLVM takes several times longer to compile the kernel.
+                            tx, ty = tiles[0], tiles[2]
+                            while ty < tiles[3]:
+                                k = row + ty * tiles_x + tx
+                                chunk_count[k] = chunk_count[k] + 1
+                                only = -1
+                                tx += 1
+                                if tx == tiles[1]:
+                                    tx = tiles[0]
+                                    ty += 1
+                    only_tile[i] = only
+                c = ti.atomic_add(queue[0], 1)
+    queue[0] = 0
+
+
+@ti.kernel
+def _chunk_offsets(chunk_count: ti.types.ndarray(dtype=ti.i32, ndim=1), chunks: ti.i32,
+                   tile_start: ti.types.ndarray(ndim=1)) -> ti.i64:
+    """Stage 2 (CPU): each tile's first entry, and in place of each count the place of
+    the chunk's first entry in the tile: a tile holds chunk 0's entries, then chunk 1's...
+
+    Returns the number of entries. Serial: a few tens of thousands of counts."""
+    n_tiles = tile_start.shape[0] - 1
+    total = ti.i64(0)
+    ti.loop_config(serialize=True)
+    for t in range(n_tiles):
+        tile_start[t] = ti.cast(ti.min(total, _MAX_ENTRIES), ti.i32)
+        for c in range(chunks):
+            k = c * n_tiles + t
+            count = chunk_count[k]
+            chunk_count[k] = ti.cast(ti.min(total, _MAX_ENTRIES), ti.i32)
+            total += count
+    tile_start[n_tiles] = ti.cast(ti.min(total, _MAX_ENTRIES), ti.i32)
+    return total
+
+
+@ti.kernel
+def _bin_chunk_circles(
+    pos: ti.types.ndarray(ndim=1),
+    vel: ti.types.ndarray(ndim=2),
+    radius: ti.types.ndarray(ndim=1),
+    color: ti.types.ndarray(ndim=2),
+    colormap: ti.types.ndarray(ndim=2),
+    chunk_cursor: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    chunks: ti.i32,
+    only_tile: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    queue: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    workers: ti.i32,
+    entries: ti.types.ndarray(dtype=ti.math.vec4, ndim=1),
+    speed_mode: ti.template(),
+    inv_speed_scale: ti.f32,
+    view: ti.math.vec4,
+    box: ti.math.vec2,
+    clip: ti.math.ivec4,
+    tiles_x: ti.i32,
+    periodic: ti.template(),
+):
+    """Stage 3 (CPU): write each circle's image centre, radius and colour into every tile
+    it touches, at its chunk's cursor in the tile (the chunks of stage 1, so each cursor
+    has one writer). A circle with a tile in ``only_tile`` goes there directly."""
+    n = radius.shape[0]
+    n_tiles = chunk_cursor.shape[0] // chunks
+    for w in range(workers * _CPU_BLOCK):
+        if w % _CPU_BLOCK == 0:
+            c = ti.atomic_add(queue[0], 1)
+            while c < chunks:
+                row = c * n_tiles
+                for i in range(_chunk_begin(c, n, chunks), _chunk_begin(c + 1, n, chunks)):
+                    r = ti.cast(radius[i], ti.f32) * view[0]
+                    wx = ti.cast(pos[2 * i], ti.f32)
+                    wy = ti.cast(pos[2 * i + 1], ti.f32)
+                    packed_rgb = _packed_colour(i, vel, color, colormap, speed_mode,
+                                                inv_speed_scale)
+                    only = only_tile[i]
+                    if only >= 0:
+                        k = row + only
+                        slot = chunk_cursor[k]
+                        chunk_cursor[k] = slot + 1
+                        entries[slot] = ti.math.vec4(
+                            _image_centre(wx, wy, _SHIFTS[0], view, box), r, packed_rgb)
+                    else:
+                        reach = _reach(r)
+                        for s in ti.static(range(9 if periodic else 1)):
+                            centre = _image_centre(wx, wy, _SHIFTS[s], view, box)
+                            tiles = _tile_range(_pixel_range(centre[0], centre[1], reach,
+                                                             clip))
+                            for ty in range(tiles[2], tiles[3]):
+                                for tx in range(tiles[0], tiles[1]):
+                                    k = row + ty * tiles_x + tx
+                                    slot = chunk_cursor[k]
+                                    chunk_cursor[k] = slot + 1
+                                    entries[slot] = ti.math.vec4(centre, r, packed_rgb)
+                c = ti.atomic_add(queue[0], 1)
+    queue[0] = 0
 
 
 @ti.func
-def _draw_circle(scratch: ti.template(), slot: ti.i32, x0: ti.i32, y0: ti.i32, cx: ti.f32,
-                 cy: ti.f32, r: ti.f32, rgb: ti.math.ivec3, pixels: ti.math.ivec4):
+def _add(scratch: ti.template(), pixel: ti.i32, coverage: ti.f32, red_green: ti.i64,
+         blue_one: ti.i64):
+    """Add a coverage of the colour to scratch pixel ``pixel`` (two 64-bit words, each
+    holding two 32-bit sums: red | green << 32 and blue | coverage << 32).
+
+    The sums are non-negative and below 2^31 (see _COVERAGE_BITS), so adding the packed
+    words adds each half on its own. The scratch tile has one user at a time: a plain
+    read-modify-write, no atomics."""
+    weight = ti.cast(ti.cast(coverage * _COVERAGE_ONE + 0.5, ti.i32), ti.i64)
+    scratch[2 * pixel] = scratch[2 * pixel] + weight * red_green
+    scratch[2 * pixel + 1] = scratch[2 * pixel + 1] + weight * blue_one
+
+
+@ti.func
+def _draw_circle(scratch: ti.template(), base: ti.i32, x0: ti.i32, y0: ti.i32, cx: ti.f32,
+                 cy: ti.f32, r: ti.f32, red_green: ti.i64, blue_one: ti.i64,
+                 pixels: ti.math.ivec4):
     """Accumulate the coverage of the circle of centre (cx, cy) and radius r (in pixels)
-    over ``pixels`` = [x_lo, x_hi) x [y_lo, y_hi), into the tile at (x0, y0)."""
+    over ``pixels`` = [x_lo, x_hi) x [y_lo, y_hi), into the scratch tile of first pixel
+    ``base``, whose top-left pixel is at (x0, y0) in the image."""
     if r < _POINT_RADIUS:
         # Area below one pixel: the weights are bilinear in the sub-pixel position (the
         # general case below with a one-pixel square, unrolled: most circles of a
@@ -274,11 +457,19 @@ def _draw_circle(scratch: ti.template(), slot: ti.i32, x0: ti.i32, y0: ti.i32, c
         y = ti.floor(fy, ti.i32)
         tx = fx - x
         ty = fy - y
-        for dy in ti.static(range(2)):
-            for dx in ti.static(range(2)):
-                if pixels[0] <= x + dx < pixels[1] and pixels[2] <= y + dy < pixels[3]:
+        first = base + (y - y0) * _TILE + x - x0
+        if pixels[0] <= x and x + 1 < pixels[1] and pixels[2] <= y and y + 1 < pixels[3]:
+            # All four pixels in the tile, as for most circles.
+            for dy in ti.static(range(2)):
+                for dx in ti.static(range(2)):
                     weight = area * (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
-                    _add(scratch, slot, x + dx - x0, y + dy - y0, weight, rgb)
+                    _add(scratch, first + dy * _TILE + dx, weight, red_green, blue_one)
+        else:
+            for dy in ti.static(range(2)):
+                for dx in ti.static(range(2)):
+                    if pixels[0] <= x + dx < pixels[1] and pixels[2] <= y + dy < pixels[3]:
+                        weight = area * (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
+                        _add(scratch, first + dy * _TILE + dx, weight, red_green, blue_one)
     elif r < _SMALL_RADIUS:
         # The square of the circle's area, box-filtered exactly: its pixel coverages sum
         # to pi r^2 wherever it sits. A side below one pixel is widened to one pixel at
@@ -291,7 +482,8 @@ def _draw_circle(scratch: ti.template(), slot: ti.i32, x0: ti.i32, y0: ti.i32, c
             for x in range(pixels[0], pixels[1]):
                 overlap_x = ti.min(x + 1.0, cx + half) - ti.max(x + 0.0, cx - half)
                 if overlap_x > 0.0 and overlap_y > 0.0:
-                    _add(scratch, slot, x - x0, y - y0, density * overlap_x * overlap_y, rgb)
+                    _add(scratch, base + (y - y0) * _TILE + x - x0,
+                         density * overlap_x * overlap_y, red_green, blue_one)
     else:
         reach = ti.sqrt(r * r - 1.0 / 12.0) + 0.5
         for y in range(pixels[2], pixels[3]):
@@ -300,97 +492,154 @@ def _draw_circle(scratch: ti.template(), slot: ti.i32, x0: ti.i32, y0: ti.i32, c
                 dx = x + 0.5 - cx
                 coverage = ti.min(reach - ti.sqrt(dx * dx + dy * dy), 1.0)
                 if coverage > 0.0:
-                    _add(scratch, slot, x - x0, y - y0, coverage, rgb)
+                    _add(scratch, base + (y - y0) * _TILE + x - x0, coverage, red_green,
+                         blue_one)
+
+
+@ti.func
+def _draw_item(item: ti.i32, slot: ti.i32, tile_start: ti.template(), entries: ti.template(),
+               scratch: ti.template(), image: ti.template(), width: ti.i32, height: ti.i32,
+               clip: ti.math.ivec4, tiles_x: ti.i32, background: ti.math.vec3,
+               margin: ti.math.vec3, box_px: ti.math.vec4, tiles_per_item: ti.i32):
+    """Draw the ``tiles_per_item`` tiles of work item ``item`` one after the other, each
+    accumulated in scratch tile ``slot``, which is left zeroed."""
+    inside = ti.cast(background + 0.5, ti.i32)
+    base = slot * _TILE * _TILE
+    for step in range(tiles_per_item):
+        t = item * tiles_per_item + step
+        x0 = (t % tiles_x) * _TILE
+        y0 = (t // tiles_x) * _TILE
+        x1 = ti.min(x0 + _TILE, width)
+        y1 = ti.min(y0 + _TILE, height)
+        tile_clip = ti.math.ivec4(ti.max(x0, clip[0]), ti.min(x1, clip[1]),
+                                  ti.max(y0, clip[2]), ti.min(y1, clip[3]))
+        for k in range(tile_start[t], tile_start[t + 1]):
+            entry = entries[k]
+            cx, cy, r = entry[0], entry[1], entry[2]
+            packed_rgb = ti.bit_cast(entry[3], ti.i32)
+            red_green = ti.cast(packed_rgb & 255, ti.i64) \
+                | (ti.cast((packed_rgb >> 8) & 255, ti.i64) << 32)
+            blue_one = ti.cast(packed_rgb >> 16, ti.i64) | (ti.i64(1) << 32)
+            _draw_circle(scratch, base, x0, y0, cx, cy, r, red_green, blue_one,
+                         _pixel_range(cx, cy, _reach(r), tile_clip))
+        # A tile wholly inside the box has the plain background; others shade the margin
+        # and anti-alias the box edges by the fraction of each pixel inside.
+        interior = (x0 >= box_px[0] and x1 <= box_px[1] and y0 >= box_px[2]
+                    and y1 <= box_px[3])
+        if interior and tile_start[t] == tile_start[t + 1]:
+            # No circle here: the plain background, and the scratch is still zero.
+            for y in range(y0, y1):
+                for x in range(x0, x1):
+                    for c in ti.static(range(3)):
+                        image[(y * width + x) * 3 + c] = ti.cast(inside[c], ti.u8)
+            continue
+        for y in range(y0, y1):
+            inside_y = ti.max(ti.min(y + 1.0, box_px[3]) - ti.max(y + 0.0, box_px[2]), 0.0)
+            for x in range(x0, x1):
+                rgb = inside
+                if not interior:
+                    inside_x = ti.max(ti.min(x + 1.0, box_px[1]) - ti.max(x + 0.0, box_px[0]),
+                                      0.0)
+                    rgb = ti.cast(margin + (background - margin) * (inside_x * inside_y) + 0.5,
+                                  ti.i32)
+                pixel = 2 * (base + (y - y0) * _TILE + x - x0)
+                red_green = scratch[pixel]
+                blue_total = scratch[pixel + 1]
+                scratch[pixel] = ti.i64(0)
+                scratch[pixel + 1] = ti.i64(0)
+                total = ti.cast(blue_total >> 32, ti.i32)
+                # Casting to i32 keeps the low 32 bits: the low half of a word.
+                painted = ti.math.ivec3(ti.cast(red_green, ti.i32),
+                                        ti.cast(red_green >> 32, ti.i32),
+                                        ti.cast(blue_total, ti.i32))
+                # The background shows through what the circles leave uncovered...
+                mixed = (painted + rgb * (_COVERAGE_ONE - total) + _COVERAGE_ONE // 2) \
+                    >> _COVERAGE_BITS
+                if total > _COVERAGE_ONE:
+                    # ...or overlapping circles: their colours averaged by coverage.
+                    mixed = (painted + total // 2) // total
+                # Without a branch on the coverage, which is as often zero as not.
+                rgb = ti.select(total > 0, mixed, rgb)
+                for c in ti.static(range(3)):
+                    image[(y * width + x) * 3 + c] = ti.cast(ti.min(rgb[c], 255), ti.u8)
 
 
 @ti.kernel
 def _draw_tiles(
     tile_start: ti.types.ndarray(ndim=1),
     entries: ti.types.ndarray(dtype=ti.math.vec4, ndim=1),
-    scratch: ti.types.ndarray(dtype=ti.math.ivec4, ndim=3),
-    image: ti.types.ndarray(ndim=3),
+    scratch: ti.types.ndarray(dtype=ti.i64, ndim=1),
+    image: ti.types.ndarray(dtype=ti.u8, ndim=1),
+    width: ti.i32,
+    height: ti.i32,
     clip: ti.math.ivec4,
     tiles_x: ti.i32,
     background: ti.math.vec3,
     margin: ti.math.vec3,
     box_px: ti.math.vec4,
     tiles_per_item: ti.i32,
-    block_dim: ti.template(),
+    queue: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    workers: ti.i32,
+    cpu: ti.template(),
 ):
     """Stage 4: draw the tiles' circles and composite the pixels over the background.
 
-    Work item ``w`` of ``scratch.shape[0]`` draws ``tiles_per_item`` tiles one after the
-    other, accumulating each in its own scratch tile, which it leaves zeroed. On a CPU an
-    item is a row of tiles, so the scratch of the threads stays in cache and the image is
-    written band by band; on a GPU an item is a single tile."""
-    height, width = image.shape[0], image.shape[1]
-    inside = ti.cast(background + 0.5, ti.i32)
-    ti.loop_config(block_dim=block_dim)
-    for w in range(scratch.shape[0]):
-        for step in range(tiles_per_item):
-            t = w * tiles_per_item + step
-            x0 = (t % tiles_x) * _TILE
-            y0 = (t // tiles_x) * _TILE
-            x1 = ti.min(x0 + _TILE, width)
-            y1 = ti.min(y0 + _TILE, height)
-            tile_clip = ti.math.ivec4(ti.max(x0, clip[0]), ti.min(x1, clip[1]),
-                                      ti.max(y0, clip[2]), ti.min(y1, clip[3]))
-            for k in range(tile_start[t], tile_start[t + 1]):
-                entry = entries[k]
-                cx, cy, r = entry[0], entry[1], entry[2]
-                packed_rgb = ti.bit_cast(entry[3], ti.i32)
-                rgb = ti.math.ivec3(packed_rgb & 255, (packed_rgb >> 8) & 255,
-                                    packed_rgb >> 16)
-                _draw_circle(scratch, w, x0, y0, cx, cy, r, rgb,
-                             _pixel_range(cx, cy, _reach(r), tile_clip))
-            # A tile wholly inside the box has the plain background; others shade the
-            # margin and anti-alias the box edges by the fraction of each pixel inside.
-            interior = (x0 >= box_px[0] and x1 <= box_px[1] and y0 >= box_px[2]
-                        and y1 <= box_px[3])
-            if interior and tile_start[t] == tile_start[t + 1]:
-                # No circle here: the plain background, and the scratch is still zero.
-                for y in range(y0, y1):
-                    for x in range(x0, x1):
-                        for c in ti.static(range(3)):
-                            image[y, x, c] = ti.cast(inside[c], ti.u8)
-                continue
-            for y in range(y0, y1):
-                inside_y = ti.max(ti.min(y + 1.0, box_px[3]) - ti.max(y + 0.0, box_px[2]),
-                                  0.0)
-                for x in range(x0, x1):
-                    base = inside
-                    if not interior:
-                        inside_x = ti.max(ti.min(x + 1.0, box_px[1])
-                                          - ti.max(x + 0.0, box_px[0]), 0.0)
-                        base = ti.cast(margin + (background - margin) * (inside_x * inside_y)
-                                       + 0.5, ti.i32)
-                    sums = scratch[w, y - y0, x - x0]
-                    total = sums[3]
-                    rgb = base
-                    if total > 0:
-                        painted = sums.xyz
-                        if total <= _COVERAGE_ONE:
-                            # The background shows through what the circles leave uncovered.
-                            rgb = (painted + base * (_COVERAGE_ONE - total)
-                                   + _COVERAGE_ONE // 2) >> _COVERAGE_BITS
-                        else:
-                            # Overlapping circles: their colours averaged by coverage.
-                            rgb = (painted + total // 2) // total
-                        scratch[w, y - y0, x - x0] = ti.math.ivec4(0)
-                    for c in ti.static(range(3)):
-                        image[y, x, c] = ti.cast(ti.min(rgb[c], 255), ti.u8)
+    ``image`` is the (height, width, 3) image flattened and ``scratch`` holds tiles of
+    ``_TILE * _TILE`` pixels of two words (see ``_add``): on a CPU an access through a
+    one-dimensional array costs less than through a multidimensional one.
+
+    The tiles are drawn in work items of ``tiles_per_item`` tiles. On a CPU an item is a
+    row of tiles and ``workers`` workers (see ``_CPU_BLOCK``) take the items from
+    ``queue[0]``, each with its own scratch tile, which stays in cache; the image is
+    written band by band. On a GPU an item is a single tile, with its thread and its
+    scratch tile."""
+    items = (tile_start.shape[0] - 1) // tiles_per_item
+    if ti.static(cpu):
+        for w in range(workers * _CPU_BLOCK):
+            if w % _CPU_BLOCK == 0:
+                item = ti.atomic_add(queue[0], 1)
+                while item < items:
+                    _draw_item(item, w // _CPU_BLOCK, tile_start, entries, scratch, image,
+                               width, height, clip, tiles_x, background, margin, box_px,
+                               tiles_per_item)
+                    item = ti.atomic_add(queue[0], 1)
+        queue[0] = 0
+    else:
+        ti.loop_config(block_dim=128)
+        for item in range(items):
+            _draw_item(item, item, tile_start, entries, scratch, image, width, height, clip,
+                       tiles_x, background, margin, box_px, tiles_per_item)
 
 
 def _on_cpu():
     return impl.current_cfg().arch in (ti.x64, ti.arm64)
 
 
+# On a CPU stages 1 and 3 cut the circles into this many chunks per thread (for balance
+# when a thread is slowed), each with a row of counts over all the tiles...
+_CHUNKS_PER_THREAD = 4
+# ...unless the rows would take more than this many counts: then the atomic stages run.
+_MAX_CHUNK_COUNTS = 1 << 24
+
+
+def _cpu_threads():
+    return max(int(impl.current_cfg().cpu_max_num_threads), 1)
+
+
+def _cpu_chunks(tiles):
+    """Chunks of circles for stages 1 and 3 on a CPU; 0 to use the atomic stages."""
+    threads = _cpu_threads()
+    chunks = min(_CHUNKS_PER_THREAD * threads, _MAX_CHUNK_COUNTS // tiles)
+    return chunks if chunks >= threads else 0
+
+
 class _Buffers:
     """Device arrays kept between calls of the same image size.
 
     They belong to the Taichi program that made them; after ``ti.reset`` or a new
-    ``ti.init`` they are made again. Stage 2 zeroes the tile counts and stage 4 the
-    accumulator, so they are cleared only after a call was interrupted midway.
+    ``ti.init`` they are made again. Stage 1 (CPU) or 2 (GPU) zeroes the tile counts,
+    stage 4 the accumulator and each CPU stage its queue, so they are cleared only after
+    a call was interrupted midway.
     """
 
     def __init__(self):
@@ -404,14 +653,22 @@ class _Buffers:
             self.program = None  # stays None if an allocation below fails
             tiles_x, tiles_y = -(-width // _TILE), -(-height // _TILE)
             self.tiles_x, self.tiles = tiles_x, tiles_x * tiles_y
-            self.scratch = None
-            self.block_dim = 1 if _on_cpu() else 128
-            self.tiles_per_item = tiles_x if _on_cpu() else 1
-            items = self.tiles // self.tiles_per_item
-            self.scratch = ti.ndarray(ti.math.ivec4, shape=(items, _TILE, _TILE))
-            self.tile_count = ti.ndarray(ti.i32, shape=(self.tiles, 2))
+            self.scratch = self.tile_count = self.tile_cursor = self.chunk_count = None
+            self.cpu = _on_cpu()
+            self.workers = _cpu_threads() if self.cpu else 0
+            self.tiles_per_item = tiles_x if self.cpu else 1
+            self.chunks = _cpu_chunks(self.tiles) if self.cpu else 0
+            # A scratch tile per worker on a CPU, per item on a GPU; two 64-bit words per
+            # pixel (see _add).
+            slots = self.workers if self.cpu else self.tiles // self.tiles_per_item
+            self.scratch = ti.ndarray(ti.i64, shape=(slots * _TILE * _TILE * 2,))
+            self.queue = ti.ndarray(ti.i32, shape=(1,))
+            if self.chunks:
+                self.chunk_count = ti.ndarray(ti.i32, shape=(self.chunks * self.tiles,))
+            else:
+                self.tile_count = ti.ndarray(ti.i32, shape=(self.tiles, 2))
+                self.tile_cursor = ti.ndarray(ti.i32, shape=(self.tiles,))
             self.tile_start = ti.ndarray(ti.i32, shape=(self.tiles + 1,))
-            self.tile_cursor = ti.ndarray(ti.i32, shape=(self.tiles,))
             self.entries = None
             self.rank = None
             self.dirty = True
@@ -419,11 +676,14 @@ class _Buffers:
             self.program = program
         if self.dirty:
             self.scratch.fill(0)
-            self.tile_count.fill(0)
+            self.queue.fill(0)
+            if self.tile_count is not None:
+                self.tile_count.fill(0)
             self.dirty = False
         return self
 
     def reserve_circles(self, n):
+        # Per circle: its rank in its tile (GPU stages) or its only tile (CPU stages).
         if self.rank is None or self.rank.shape[0] < n:
             self.rank = None
             self.rank = ti.ndarray(ti.i32, shape=(max(n + n // 4, 1024),))
@@ -540,19 +800,34 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
     buffers = _buffers.get(height, width)
     _buffers.dirty = True
     buffers.reserve_circles(n)
-    _count_tile_entries(pos, radius, buffers.tile_count, buffers.rank, view, box_vec, clip,
-                        buffers.tiles_x, periodic)
-    entries = _tile_offsets(buffers.tile_count, buffers.tile_start, buffers.tile_cursor)
+    # The CPU stages take the positions flattened: cheaper to index.
+    flat_pos = pos.reshape(-1)
+    if buffers.chunks:
+        _count_chunk_entries(flat_pos, radius, buffers.chunk_count, buffers.chunks,
+                             buffers.rank, buffers.queue, buffers.workers, view, box_vec,
+                             clip, buffers.tiles_x, periodic)
+        entries = _chunk_offsets(buffers.chunk_count, buffers.chunks, buffers.tile_start)
+    else:
+        _count_tile_entries(pos, radius, buffers.tile_count, buffers.rank, view, box_vec,
+                            clip, buffers.tiles_x, periodic)
+        entries = _tile_offsets(buffers.tile_count, buffers.tile_start, buffers.tile_cursor)
     if entries > _MAX_ENTRIES:
         raise ValueError(f"{entries} circle-tile overlaps exceed {_MAX_ENTRIES}: the "
                          "circles are too large for this image size")
     buffers.reserve_entries(entries)
-    _bin_circles(pos, vel, radius, color, VIRIDIS, buffers.rank, buffers.tile_start,
-                 buffers.tile_cursor, buffers.entries,
-                 speed_mode, 1.0 / speed_scale, view, box_vec, clip, buffers.tiles_x, periodic)
-    _draw_tiles(buffers.tile_start, buffers.entries, buffers.scratch, image, clip,
-                buffers.tiles_x, ti.math.vec3(*background),
+    inv_speed_scale = 1.0 / speed_scale
+    if buffers.chunks:
+        _bin_chunk_circles(flat_pos, vel, radius, color, VIRIDIS, buffers.chunk_count,
+                           buffers.chunks, buffers.rank, buffers.queue, buffers.workers,
+                           buffers.entries, speed_mode, inv_speed_scale, view, box_vec, clip,
+                           buffers.tiles_x, periodic)
+    else:
+        _bin_circles(pos, vel, radius, color, VIRIDIS, buffers.rank, buffers.tile_start,
+                     buffers.tile_cursor, buffers.entries, speed_mode, inv_speed_scale, view,
+                     box_vec, clip, buffers.tiles_x, periodic)
+    _draw_tiles(buffers.tile_start, buffers.entries, buffers.scratch, image.reshape(-1),
+                width, height, clip, buffers.tiles_x, ti.math.vec3(*background),
                 ti.math.vec3(*(background * MARGIN_SHADE)), ti.math.vec4(*box_px),
-                buffers.tiles_per_item, buffers.block_dim)
+                buffers.tiles_per_item, buffers.queue, buffers.workers, buffers.cpu)
     _buffers.dirty = False
     return image

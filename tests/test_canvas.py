@@ -183,6 +183,23 @@ def test_gpu_layout_draws_the_same_image(canvas, monkeypatch):
     assert (cpu_image == gpu_layout_image).all()
 
 
+def test_cpu_stages_draw_the_same_image_with_any_chunks(canvas, monkeypatch):
+    # On a CPU the circles are binned in chunks, with plain increments; with no chunks
+    # (too many tiles for their counts) the atomic stages run instead. Circles large
+    # and small, crossing tiles and the box edges: the images must be equal bit for bit.
+    rng = np.random.default_rng(3)
+    n = 5000
+    args = (rng.uniform((-0.5, -0.5), (16.5, 9.5), size=(n, 2)), rng.normal(size=(n, 2)),
+            rng.uniform(0.002, 0.5, n), rng.integers(0, 256, (n, 3), dtype=np.uint8), BOX,
+            413, 229)
+    image = canvas.render(*args, periodic=True)
+    for chunks in (1, 7, 0):
+        monkeypatch.setattr(canvas, "_cpu_chunks", lambda tiles, chunks=chunks: chunks)
+        monkeypatch.setattr(canvas, "_buffers", canvas._Buffers())
+        assert (canvas.render(*args, periodic=True) == image).all()
+        assert canvas._buffers.chunks == chunks
+
+
 @pytest.mark.parametrize("mode", ["random", "speed"])
 def test_simulation_render_draws_its_state(canvas, circles_cpu, mode):
     """Simulation.render draws the circles in their storage order (cell order after the
