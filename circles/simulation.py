@@ -566,9 +566,10 @@ class Simulation:
         # integers), so the arrays go as stored, without putting them in creation order.
         if self._color_cache is None:
             self._color_cache = self._color[self._ids]
-        pos = self.pos.to_numpy().astype(np.float64)
-        vel = self.vel.to_numpy().astype(np.float64)
-        radius = self.radius.to_numpy().astype(np.float64)
+        # As stored (the canvas takes float32 or float64 alike); velocities only colour by speed.
+        pos = self.pos.to_numpy()
+        radius = self.radius.to_numpy()
+        vel = self.vel.to_numpy().astype(np.float64) if color == "speed" else np.zeros(pos.shape, pos.dtype)
         if color == "speed" and speed_scale is None:
             # A sum over circles: taken in creation order, so it does not follow the storage order.
             speed_scale = speed_scale_of(self._creation_order(vel))
