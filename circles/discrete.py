@@ -97,10 +97,10 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
 
 
 @ti.func
-def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), slot: ti.template(),
-                   contacts: ti.template(), n_contacts: ti.template(), marked: ti.template(), lists: ti.template(),
-                   work: ti.template(), cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(),
-                   ncx, ncy, rows, segs, box_w, box_h, real: ti.template(), periodic: ti.template()):
+def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
+                   n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
+                   cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
+                   box_w, box_h, real: ti.template(), periodic: ti.template()):
     """Fill the contact lists and the first work list: every overlapping pair, found once, from
     the forward half of the cells of one of its circles (half the pair tests of a full 3 x 3
     search). Contact lists start empty; this step's first round number is work[ROUND] + 1."""
@@ -108,13 +108,16 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
     forward = forward_fits(ncx, ncy, periodic)
     work[ROUND] += 1
     work[LIST0] = 0
-    for i in range(pos.shape[0]):
+    for own in range(pos.shape[0]):
+        # In slot order: the circle's own slot is the loop index, and its forward slots follow.
         rnd = work[ROUND]
+        i = sorted_ids[own]
         c = cell_of[i]
         if forward:
-            own = cell_start[c] + slot[i]
+            cy = c // ncx
+            cx = c - cy * ncx
             for q in ti.static(range(forward_parts(periodic))):
-                k_lo, k_hi = forward_range(q, c, own, cell_start, ncx, ncy, periodic)
+                k_lo, k_hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
                 for k in range(k_lo, k_hi):
                     _record_contact(i, sorted_ids[k], pos, vel, radius, contacts, n_contacts, marked, lists, work,
                                     rnd, box, periodic)
@@ -378,7 +381,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
           box_w, box_h, real, periodic)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
-    _scan_contacts(pos, vel, radius, slot, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
+    _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
             pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,

@@ -81,8 +81,8 @@ def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: 
 
 
 @ti.func
-def forward_range(q, c, own, cell_start: ti.template(), ncx, ncy, periodic: ti.template()):
-    """Slots [k_lo, k_hi) of part `q` of the forward half of the 3 x 3 cells around c.
+def forward_range(q, c, cx, cy, own, cell_start: ti.template(), ncx, ncy, periodic: ti.template()):
+    """Slots [k_lo, k_hi) of part `q` of the forward half of the 3 x 3 cells around c = (cx, cy).
 
     The forward half of the circle in slot `own` of cell c: the later slots of c, the cell to
     its right and the three cells of the row above. Each pair of circles in neighbouring
@@ -91,23 +91,26 @@ def forward_range(q, c, own, cell_start: ti.template(), ncx, ncy, periodic: ti.t
     4 in a periodic box (own cell, right cell, and the row above in up to two runs), where it
     needs at least 3 cells along each axis (`forward_fits`).
     """
-    cx = c % ncx
-    cy = c // ncx
     lo = own + 1
     hi = own + 1
     if ti.static(periodic):
         if q == 0:
             hi = cell_start[c + 1]
         elif q == 1:
-            right = cy * ncx + (cx + 1) % ncx
+            right = c + 1 if cx + 1 < ncx else c + 1 - ncx
             lo, hi = cell_start[right], cell_start[right + 1]
         else:
             lo, hi = neighbour_range(c, 2, q - 2, cell_start, ncx, ncy, periodic)
     else:
         if q == 0:
-            hi = cell_start[cy * ncx + ti.min(cx + 2, ncx)]
+            hi = cell_start[c + (2 if cx + 2 <= ncx else 1)]
         else:
-            lo, hi = neighbour_range(c, 2, 0, cell_start, ncx, ncy, periodic)
+            lo = 0
+            hi = 0
+            if cy + 1 < ncy:
+                above = c + ncx
+                lo = cell_start[above - (1 if cx > 0 else 0)]
+                hi = cell_start[above + (2 if cx + 2 <= ncx else 1)]
     return lo, hi
 
 
