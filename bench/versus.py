@@ -1,0 +1,105 @@
+"""Side-by-side speed of this tree's engine against an earlier commit, in one run.
+
+    python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
+
+The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
+same scene (area fraction 0.3, walls, f32, radius 0.5, speeds in (0.5, 1.0), default dt, seed 1)
+in fresh processes, alternating base and this tree `--rounds` times, so that the load of a
+shared machine falls on both alike; each process times single steps after 16 warm-up steps
+(which compile every kernel, the periodic reorder's included).
+Reported: median circle-steps/s of each engine with [min, max] over all its timed steps, the
+ratio of the medians, and the pair collisions and energy change of each (the same scene and
+the same physics must give the same counts: a speed-up that changes them is not one).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+
+CHILD = """
+import json, sys, time, math
+import numpy as np
+import circles
+n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+circles.init(arch="cpu")
+r, fraction = 0.5, 0.3
+side = math.sqrt(n * math.pi * r * r / fraction)
+sim = circles.Simulation(circles.Scene(n=n, box=(side * 4 / 3, side * 3 / 4), radius=r, speed=(0.5, 1.0),
+                                       scheme=scheme, precision="f32", seed=1))
+sim.step(16)  # compiles every kernel of a step, the reorder of every 16th step included
+start = sim.stats()
+times = []
+for _ in range(steps):
+    t = time.perf_counter()
+    sim.step(1)
+    times.append(time.perf_counter() - t)
+end = sim.stats()
+print(json.dumps({"times": times, "pairs": end["pair_collisions"] - start["pair_collisions"],
+                  "energy_change": end["kinetic_energy"] / start["kinetic_energy"] - 1}))
+"""
+
+
+def export(ref, into):
+    """The tree of commit `ref` written into the folder `into`."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
+                             check=True).stdout
+    tar_path = Path(into) / "tree.tar"
+    tar_path.write_bytes(archive)
+    with tarfile.open(tar_path) as tar:
+        tar.extractall(into, filter="data")
+    tar_path.unlink()
+
+
+def run(tree, n, scheme, steps):
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps)], capture_output=True, text=True,
+                         env=env, cwd=str(tree), check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--base", required=True, help="the earlier commit (any git revision)")
+    parser.add_argument("--n", type=int, nargs="+", default=[100_000, 1_000_000])
+    parser.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=["discrete", "event"])
+    parser.add_argument("--rounds", type=int, default=3, help="processes per engine and row, alternating")
+    args = parser.parse_args()
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                          check=True).stdout.strip()
+    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "circles"], capture_output=True,
+                           text=True, check=True).stdout.strip()
+    this = f"{head}{' + uncommitted changes' if dirty else ''}"
+    print(f"base {args.base} against this tree ({this}); area fraction 0.3, walls, f32, default dt\n")
+    print("| N | scheme | base circle-steps/s | this circle-steps/s | ratio | base pairs, energy change "
+          "| this pairs, energy change |")
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        export(args.base, tmp)
+        for n in args.n:
+            for scheme in args.scheme:
+                steps = max(3, min(20, int(2e6 // n) if scheme == "event" else int(2e7 // n)))
+                speeds = {"base": [], "this": []}
+                last = {}
+                for _ in range(args.rounds):
+                    for name, tree in (("base", tmp), ("this", ROOT)):
+                        result = run(tree, n, scheme, steps)
+                        speeds[name] += [n / t for t in result["times"]]
+                        last[name] = result
+                med = {k: float(np.median(v)) for k, v in speeds.items()}
+                cells = [f"{med[k] / 1e6:.3g} M [{min(speeds[k]) / 1e6:.3g}, {max(speeds[k]) / 1e6:.3g}]"
+                         for k in ("base", "this")]
+                facts = [f"{last[k]['pairs']}, {last[k]['energy_change']:.2g}" for k in ("base", "this")]
+                print(f"| {n} | {scheme} | {cells[0]} | {cells[1]} | {med['this'] / med['base']:.2f} | "
+                      f"{facts[0]} | {facts[1]} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
