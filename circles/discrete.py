@@ -108,6 +108,7 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
     forward = forward_fits(ncx, ncy, periodic)
     work[ROUND] += 1
     work[LIST0] = 0
+    work[LIST1] = 0
     for own in range(pos.shape[0]):
         # In slot order: the circle's own slot is the loop index, and its forward slots follow.
         rnd = work[ROUND]
@@ -247,13 +248,12 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
-             sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, counters: ti.template(),
-             real: ti.template(), periodic: ti.template(), side: ti.template()):
+             sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, real: ti.template(),
+             periodic: ti.template(), side: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
-    the circles whose picks that changes for the next round (the other list)."""
+    the circles whose picks that changes for the next round (the other list, which is empty on
+    entry); this round's list is emptied after."""
     box = ti.Vector([box_w, box_h], dt=real)
-    counters[0] = 0
-    work[LIST0 + 1 - side] = 0
     for a in range(work[LIST0 + side]):
         rnd = work[ROUND]
         i = lists[side, a]
@@ -275,17 +275,15 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
                 owner = i if ids[i] < ids[j] else j
                 pair_count[owner] = pair_count[owner] + 1
                 virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
-                if counters[0] == 0:
-                    # "Something was resolved": a plain store, read first so the shared cache line
-                    # is written once, not bounced between cores for every pair.
-                    counters[0] = 1
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
                                   periodic, 1 - side)
                 _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
                                   periodic, 1 - side)
+    # One serial statement group between rounds (each group is a task of its own).
     work[ROUND] += 1
+    work[LIST0 + side] = 0
 
 
 @ti.func
@@ -319,33 +317,22 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
 
 @ti.func
 def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-           wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), counters: ti.template(),
-           box_w, box_h, real: ti.template(), settled_only: ti.template()):
-    """The wall reflections of the listed circles; with `settled_only`, only when the last round
-    resolved no pair (the rounds are over; otherwise more rounds come first)."""
-    box = ti.Vector([box_w, box_h], dt=real)
-    for k in range(counters[3]):
-        if not ti.static(settled_only) or counters[0] == 0:
-            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
-
-
-@ti.func
-def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
            wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), work: ti.template(),
-           counters: ti.template(), box_w, box_h, real: ti.template(), settled_only: ti.template()):
-    """The wall reflections of the listed circles; with `settled_only`, only when the last round
-    resolved no pair (the rounds are over; otherwise more rounds come first)."""
+           box_w, box_h, real: ti.template(), settled_only: ti.template()):
+    """The wall reflections of the listed circles; with `settled_only`, only when the rounds are
+    over (the next round's list, list 0 after an even number of rounds, is empty; otherwise
+    more rounds come first)."""
     box = ti.Vector([box_w, box_h], dt=real)
     for k in range(work[WALLED]):
-        if not ti.static(settled_only) or counters[0] == 0:
+        if not ti.static(settled_only) or work[LIST0] == 0:
             _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
 
 
 @ti.kernel
 def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: ndarr, wall_impulse: ndarr,
-          walled: ndarr, work: ndarr, counters: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
+          walled: ndarr, work: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
     """The wall reflections after rounds that stopped at the round limit."""
-    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, False)
+    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, False)
 
 
 @ti.func
@@ -354,16 +341,16 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(), lists: ti.template(),
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-            counters: ti.template(), real: ti.template(), periodic: ti.template(), rounds: ti.template()):
+            real: ti.template(), periodic: ti.template(), rounds: ti.template()):
     """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
     lists (`rounds` is even, so every launch starts on list 0); a round after one that
-    resolved nothing has an empty list, so it costs two empty loops."""
+    listed nothing has an empty list, so it costs two empty loops."""
     for r in ti.static(range(rounds)):
         _pick(pos, vel, radius, ids, partner, picked, contacts, n_contacts, lists, work, cell_of, cell_start,
               sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic, r % 2)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
-                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
-                 periodic, r % 2)
+                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
+                 r % 2)
 
 
 @ti.kernel
@@ -372,23 +359,23 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
-               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, counters: ndarr, real: ti.template(),
-               periodic: ti.template(), rounds: ti.template()) -> ti.i32:
+               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, real: ti.template(), periodic: ti.template(),
+               rounds: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
-    thousand circles). Returns 1 when the last round resolved a pair (more rounds may be
-    needed; the walls wait for them), else 0."""
+    thousand circles). Returns the length of the next round's work list: not 0 when more
+    rounds are needed (the walls wait for them)."""
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
           box_w, box_h, real, periodic)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
-            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
-            periodic, rounds)
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
+            rounds)
     if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, True)
-    return counters[0]
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+    return work[LIST0]
 
 
 @ti.kernel
@@ -396,12 +383,12 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
                 marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
                 lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                 wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
-                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, counters: ndarr,
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
                 real: ti.template(), periodic: ti.template(), rounds: ti.template()) -> ti.i32:
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
-            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, counters, real,
-            periodic, rounds)
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
+            rounds)
     if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, counters, box_w, box_h, real, True)
-    return counters[0]
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+    return work[LIST0]

@@ -492,19 +492,18 @@ class Simulation:
         arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._picked,
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
-        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._counters, real, periodic,
-                                   DISCRETE_FUSED_ROUNDS)
+        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, real, periodic, DISCRETE_FUSED_ROUNDS)
         done = DISCRETE_FUSED_ROUNDS
-        # Most steps settle within the fused rounds; `busy` says whether the last one resolved a pair.
+        # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
             more = min(DISCRETE_FUSED_ROUNDS, DISCRETE_MAX_ROUNDS - done)
-            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._counters, real, periodic, more)
+            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, real, periodic, more)
             done += more
         self.rounds += done
         if busy and not periodic:
             # The round limit was reached: the walls were left for rounds that did not come.
             discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
-                           self._walled, self._work, self._counters, w, hgt, real)
+                           self._walled, self._work, w, hgt, real)
         return h
 
     def _set_scalars(self, a, b):
