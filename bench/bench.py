@@ -240,18 +240,25 @@ def measure_render(sim, reps, width=1920, height=1080):
                 frame_s_min=s["min"], frame_s_max=s["max"])
 
 
-def measure_placement(n, fraction, reps, aspect=ASPECT):
+#: Placement rows at a million circles, float32: (area fraction, repeats); one or two repeats keep the run short.
+PLACEMENT_MILLION = ((0.5, 2), (0.8, 1))
+
+
+def measure_placement(n, fraction, reps, aspect=ASPECT, precision="f64"):
+    """Seconds to make Simulation(Scene) (placement and set-up) of N circles of radius R, walls, seed 0."""
+    from circles import placement as placement_module
+
     box = box_for(n, fraction, aspect)
     times = []
     for _ in range(reps):
         scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls", scheme="discrete",
-                              precision="f64", seed=0)
+                              precision=precision, seed=0)
         t0 = now()
         sim = circles.Simulation(scene)
         times.append(now() - t0)
     s = spread(times)
-    return dict(n=n, area_fraction=fraction, method="random sequential addition"
-                if fraction <= 0.45 else "lattice melted by the event scheme",
+    return dict(n=n, area_fraction=fraction, precision=precision,
+                method=placement_module.method(np.full(n, R), box, False, precision == "f32"),
                 reps=reps, place_s_median=s["median"], place_s_min=s["min"], place_s_max=s["max"],
                 max_overlap=sim.stats()["max_overlap"])
 
@@ -617,9 +624,12 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
                          t["circle_steps_per_s_median"], t["pair_collisions_per_s"], t["sim_time_per_wall_s"],
                          t["fraction_of_bound"], t["energy_rel_change"], t["max_overlap"]] for t in throughput]), ""]
     lines += ["## Placement", "",
-              md_table(["N", "area fraction", "method", "reps", "s median [min, max]"],
-                       [[p["n"], p["area_fraction"], p["method"], p["reps"],
-                         f"{g(p['place_s_median'])} [{g(p['place_s_min'])}, {g(p['place_s_max'])}]"]
+              "Seconds to make a Simulation of N circles of radius R in a 16:9 walled box (placement and set-up); "
+              "the 0.3 rows are the throughput rows' scenes.", "",
+              md_table(["N", "area fraction", "prec", "method", "reps", "s median [min, max]", "max overlap"],
+                       [[p["n"], p["area_fraction"], p.get("precision", ""), p["method"], p["reps"],
+                         f"{g(p['place_s_median'])} [{g(p['place_s_min'])}, {g(p['place_s_max'])}]",
+                         p.get("max_overlap", "")]
                         for p in placement]), ""]
     lines += ["## Render, 1920x1080 frame", "",
               md_table(["N", "first call s (compile)", "s per frame median [min, max]"],
@@ -763,16 +773,28 @@ def main(argv=None):
             ts = [t["place_s"] for t in throughput if t["n"] == n]
             if ts:
                 s = spread(ts)
-                placement.append(dict(n=n, area_fraction=AREA_FRACTION, method="random sequential addition",
-                                      reps=len(ts), place_s_median=s["median"], place_s_min=s["min"],
-                                      place_s_max=s["max"], max_overlap=""))
+                placement.append(dict(n=n, area_fraction=AREA_FRACTION, precision="f32, f64",
+                                      method="random sequential addition", reps=len(ts), place_s_median=s["median"],
+                                      place_s_min=s["min"], place_s_max=s["max"], max_overlap=""))
     if "placement" not in skip:
+        # The warm-up above placed at 0.3 only: compile the kernels of the denser methods first.
+        for fraction in (0.5, 0.8):
+            for precision in PRECISIONS:
+                guarded("placement warm-up", measure_placement, 300, fraction, 1, precision=precision)
         log("placement at area fraction 0.8")
         for n in cfg["dense_sizes"]:
             p = guarded(f"placement N={n} fraction 0.8", measure_placement, n, 0.8, 1 if n > 1000 else 2)
             if p:
                 placement.append(p)
                 log(f"  N={n}: {p['place_s_median']:.3g} s")
+        log("placement of a million circles")
+        for fraction, reps in PLACEMENT_MILLION:
+            p = guarded(f"placement N=1000000 fraction {fraction}", measure_placement, 1_000_000, fraction, reps,
+                        precision="f32")
+            if p:
+                placement.append(p)
+                log(f"  fraction {fraction}: {p['place_s_median']:.3g} s [{p['place_s_min']:.3g}, "
+                    f"{p['place_s_max']:.3g}], largest overlap {p['max_overlap']:.3g}")
 
     memory, spreads = [], []
     if "memory" not in skip:

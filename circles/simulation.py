@@ -17,7 +17,7 @@ from . import discrete, event, placement, reductions
 from .backend import ensure_init
 from .geometry import NEVER, spans
 from .grid import Grid
-from .scene import (DENSEST_PACKING, BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
+from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
 
 #: Speeds may grow by this factor within an event step before the step is cut short.
@@ -33,8 +33,6 @@ DISCRETE_MAX_ROUNDS = 16
 #: as the rounds alternate between two work lists. Rounds after the last busy one cost two
 #: empty loops each, far less than a launch.
 DISCRETE_FUSED_ROUNDS = 8
-#: A lattice start is melted until circles have had this many collisions each on average.
-MELT_COLLISIONS_PER_CIRCLE = 10
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
 #: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
@@ -112,18 +110,10 @@ class Simulation:
         fraction = float(np.sum(np.pi * radius ** 2)) / (scene.box[0] * scene.box[1])
         check_area_fraction(fraction, n, scene.box)
         periodic = scene.boundary == "periodic"
-        pos = None
-        if fraction <= placement.RSA_LIMIT:
-            pos = placement.random_sequential(radius, scene.box, periodic, scene.seed)
-        melt = pos is None
-        scale = 1.0
-        if melt:
-            pos, scale = placement.hexagonal_shrunk(radius, scene.box, periodic, rng)
+        pos = placement.place(radius, scene.box, periodic, scene.seed, rng, single=scene.precision == "f32")
         self.scene = scene
         self._setup(pos, vel, radius, mass, color, scene.box, scene.boundary, scene.scheme, scene.precision,
-                    scene.dt, record_events, need_event=melt)
-        if melt:
-            self._melt(rng, scale)
+                    scene.dt, record_events)
 
     @classmethod
     def from_arrays(cls, pos, vel, radius, mass=None, box=(1.0, 1.0), boundary="walls", scheme="event",
@@ -321,52 +311,6 @@ class Simulation:
         reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
                                  self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch)
         self._ids_cache = self._color_cache = None
-
-    def _melt(self, rng, scale=1.0):
-        """Run the event scheme from the lattice until it is forgotten, then restore the start velocities.
-
-        With scale < 1 the circles start shrunk by `scale` and grow back to their radii on the way.
-        """
-        target = None
-        if scale < 1.0:
-            target = ti.ndarray(ti.f64, shape=self.n)
-            target.from_numpy(self._radius[self._ids])
-            self.radius.from_numpy((self._radius[self._ids] * scale).astype(self._np_real))
-        start_vel = self.vel.to_numpy()
-        speeds = np.sqrt((start_vel.astype(np.float64) ** 2).sum(axis=1))
-        if speeds.max() <= 0:
-            angle = rng.uniform(0.0, 2.0 * np.pi, self.n)
-            self.vel.from_numpy(np.stack([np.cos(angle), np.sin(angle)], axis=1).astype(self._np_real))
-        vmax = float(np.sqrt((self.vel.to_numpy().astype(np.float64) ** 2).sum(axis=1)).max())
-        # Gaps in a dense lattice are a small fraction of a radius: step one mean gap at a time,
-        # so each circle has about one collision per step and the causal chains stay short.
-        fraction = float(np.sum(np.pi * self._radius ** 2)) / (self.box[0] * self.box[1])
-        mean_r = float(self._radius.mean())
-        gap = 2.0 * mean_r * (math.sqrt(DENSEST_PACKING / fraction) - 1.0)
-        h = max(gap, 1e-3 * mean_r) / vmax
-        wanted = MELT_COLLISIONS_PER_CIRCLE * self.n
-        short = self.n if scale < 1.0 else 0
-        for _ in range(100_000):
-            if short == 0 and self._pair_collisions() >= wanted:
-                break
-            self._event_step(h)
-            if short:
-                self.grid.build(self.pos, 2.0 * self._rmax)
-                short = placement.grow(self.pos, self.radius, target, self._d1, self.grid, self.box, self._real,
-                                       self.periodic)
-        if short:
-            raise ValueError(f"could not grow {short} of {self.n} circles to their radii in a {self.box[0]} x "
-                             f"{self.box[1]} box: the area fraction is too close to jamming for these radii; "
-                             "use fewer or smaller circles or a bigger box")
-        self.radius.from_numpy(self._radius[self._ids].astype(self._np_real))
-        self.vel.from_numpy(start_vel)
-        for arr in (self.pair_count, self.wall_count):
-            reductions.fill_i32(arr, 0)
-        for arr in (self.virial, self.wall_impulse):
-            reductions.fill_real(arr, 0.0)
-        reductions.fill_i32(self._counters, 0)
-        self.time, self.steps, self.rounds, self.redone_steps = 0.0, 0, 0, 0
-        self._reorder()
 
     # ---------------------------------------------------------------- stepping
     def advance(self, duration: float):
