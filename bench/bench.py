@@ -53,7 +53,10 @@ import taichi as ti
 import circles
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import peer_pymunk  # noqa: E402
+try:
+    import peer_pymunk  # noqa: E402
+except ImportError:  # no pymunk (a GPU machine, say): the peer section cannot run
+    peer_pymunk = None
 
 #: Radius of every circle (world units); box sides follow from N and the area fraction.
 R = 0.5
@@ -82,6 +85,13 @@ FULL = dict(
     copy_numbers=1 << 27, copy_reps=10,
     wp_n=2000, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0),
     memory_sizes=(1_000_000, 10_000_000), spread_sizes=(10_000, 100_000))
+#: With --arch gpu: sizes up to 1e8 in float32 (the GPU targets), no pymunk (a CPU peer), no
+#: resident-memory rows (they measure host memory) and no work-precision (a CPU-size study).
+GPU = dict(
+    sizes=(10_000, 100_000, 1_000_000, 10_000_000, 100_000_000), event_sizes=(100_000, 1_000_000, 10_000_000),
+    precisions=("f32",), reps=5, target=1.0, peer_sizes=(), dense_sizes=(1_000, 10_000), render_reps=5,
+    copy_numbers=1 << 28, copy_reps=20, memory_sizes=(), spread_sizes=(1_000_000, 10_000_000),
+    skip=("peers", "wp", "memory"))
 
 
 def now():
@@ -397,8 +407,9 @@ def measure_pymunk(n, reps, target, dt):
 
 
 def pymunk_version():
-    import pymunk
-    return pymunk.version
+    if peer_pymunk is None:
+        return "not installed"
+    return peer_pymunk.pymunk.version
 
 
 # ------------------------------------------------------------ work-precision
@@ -705,10 +716,11 @@ def main(argv=None):
     ap.add_argument("--skip", default="", help="comma list of sections to skip: "
                     "throughput,placement,memory,spread,peers,wp")
     args = ap.parse_args(argv)
-    cfg = QUICK if args.quick else FULL
-    skip = set(filter(None, args.skip.split(",")))
     start = now()
     arch = circles.init(arch=args.arch)
+    cfg = QUICK if args.quick else GPU if arch == "gpu" else FULL
+    skip = set(filter(None, args.skip.split(","))) | set(cfg.get("skip", ()))
+    precisions = cfg.get("precisions", PRECISIONS)
     machine_name = cpu_model() if arch == "cpu" else gpu_model()
     outdir = os.path.join(args.out, slug(machine_name))
     os.makedirs(outdir, exist_ok=True)
@@ -734,7 +746,7 @@ def main(argv=None):
     # Taichi keeps compiled kernels in its offline cache between runs, so this depends on what ran before.
     compile_rows = []
     for scheme in SCHEMES:
-        for precision in PRECISIONS:
+        for precision in precisions:
             t0 = now()
             ok = guarded("warm-up", lambda: circles.Simulation(circles.Scene(
                 n=200, box=box_for(200, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme,
@@ -751,7 +763,7 @@ def main(argv=None):
             for scheme in SCHEMES:
                 if scheme == "event" and n not in cfg["event_sizes"]:
                     continue
-                for precision in PRECISIONS:
+                for precision in precisions:
                     res = guarded(f"throughput N={n} {scheme} {precision}", measure_throughput, n, scheme,
                                   precision, cfg["reps"], cfg["target"], bw)
                     if res is None:
@@ -773,13 +785,13 @@ def main(argv=None):
             ts = [t["place_s"] for t in throughput if t["n"] == n]
             if ts:
                 s = spread(ts)
-                placement.append(dict(n=n, area_fraction=AREA_FRACTION, precision="f32, f64",
+                placement.append(dict(n=n, area_fraction=AREA_FRACTION, precision=", ".join(precisions),
                                       method="random sequential addition", reps=len(ts), place_s_median=s["median"],
                                       place_s_min=s["min"], place_s_max=s["max"], max_overlap=""))
     if "placement" not in skip:
         # The warm-up above placed at 0.3 only: compile the kernels of the denser methods first.
         for fraction in (0.5, 0.8):
-            for precision in PRECISIONS:
+            for precision in precisions:
                 guarded("placement warm-up", measure_placement, 300, fraction, 1, precision=precision)
         log("placement at area fraction 0.8")
         for n in cfg["dense_sizes"]:

@@ -41,10 +41,10 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
     In a walled box the circles that end up reaching past a wall are listed in `walled`
     (work[WALLED] of them): only they can need a wall reflection at the end of the step.
     """
-    box = ti.Vector([box_w, box_h], dt=real)
     h = ti.cast(dt, real)
     work[WALLED] = 0
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=real)
         n_contacts[i] = 0
         x = pos[i] + vel[i] * h
         if ti.static(periodic):
@@ -104,12 +104,12 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
     """Fill the contact lists and the first work list: every overlapping pair, found once, from
     the forward half of the cells of one of its circles (half the pair tests of a full 3 x 3
     search). Contact lists start empty; this step's first round number is work[ROUND] + 1."""
-    box = ti.Vector([box_w, box_h], dt=real)
     forward = forward_fits(ncx, ncy, periodic)
     work[ROUND] += 1
     work[LIST0] = 0
     work[LIST1] = 0
     for own in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=real)
         # In slot order: the circle's own slot is the loop index, and its forward slots follow.
         rnd = work[ROUND]
         i = sorted_ids[own]
@@ -170,8 +170,8 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
     """
     n = pos.shape[0]
     cap = contacts.shape[1]
-    box = ti.Vector([box_w, box_h], dt=real)
     for a in range(work[LIST0 + side]):
+        box = ti.Vector([box_w, box_h], dt=real)
         i = lists[side, a]
         best = ti.cast(NEVER, real)
         best_lo = n
@@ -253,8 +253,8 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
     entry); this round's list is emptied after."""
-    box = ti.Vector([box_w, box_h], dt=real)
     for a in range(work[LIST0 + side]):
+        box = ti.Vector([box_w, box_h], dt=real)
         rnd = work[ROUND]
         i = lists[side, a]
         j = partner[i]
@@ -322,8 +322,8 @@ def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_ma
     """The wall reflections of the listed circles; with `settled_only`, only when the rounds are
     over (the next round's list, list 0 after an even number of rounds, is empty; otherwise
     more rounds come first)."""
-    box = ti.Vector([box_w, box_h], dt=real)
     for k in range(work[WALLED]):
+        box = ti.Vector([box_w, box_h], dt=real)
         if not ti.static(settled_only) or work[LIST0] == 0:
             _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
 

@@ -72,9 +72,9 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
     """
     scalars[0] = ti.cast(NEVER, real)
     n = pos.shape[0]
-    box = ti.Vector([box_w, box_h], dt=real)
     horizon = ti.cast(t_end, real)
     for i in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
         if dirty[i] != 0:
             dirty[i] = 0
             ti_ = tau[i]
@@ -178,11 +178,11 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
     can change, so the sweeps end when no circle is active.
     """
     n = pos.shape[0]
-    box = ti.Vector([box_w, box_h], dt=real)
     horizon = ti.cast(t_end, real)
     two_v = ti.cast(2.0 * vlim, real)
     changed = 0
     for k in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
         if active_in[k] == 0:
             continue
         active_in[k] = 0
@@ -286,10 +286,10 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
             real: ti.template(), periodic: ti.template(), record: ti.template()) -> ti.i32:
     n = pos.shape[0]
     counters[0] = 0
-    box = ti.Vector([box_w, box_h], dt=real)
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
     for i in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
         e = ev_t[i]
         p = ev_p[i]
         if e <= horizon and e <= bound_t[i]:
@@ -380,9 +380,9 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 @ti.kernel
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
            real: ti.template(), periodic: ti.template()):
-    box = ti.Vector([box_w, box_h], dt=real)
     horizon = ti.cast(t_end, real)
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=real)
         x = pos[i] + vel[i] * (horizon - tau[i])
         if ti.static(periodic):
             x -= box * ti.floor(x / box)

@@ -4,6 +4,10 @@ Event keys order events totally: (time, lo, hi), with lo < hi the two circle ids
 or (time, i, n + w) for a hit of circle i on wall w. Every choice between events compares
 keys, never the order in which threads or cells were visited, so results do not depend on
 the thread count or on atomic slot order inside a cell.
+
+A rule for every kernel: build vectors (the box, say) inside the loop that uses them, not at
+kernel scope. Taichi keeps a kernel-scope value that a parallel loop reads in a global buffer
+aligned for scalars, and on CUDA a float64 vector read from there faults (misaligned address).
 """
 import taichi as ti
 

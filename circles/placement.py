@@ -143,8 +143,8 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
              attempts: ti.i32, r_min: ti.f64, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
              rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template(),
              single: ti.template()):
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         proposing[i] = 0
         if placed[i] == 0 and radius[i] > r_min:
             r = ti.cast(radius[i], ti.f64)
@@ -177,9 +177,9 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
 def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of: ndarr, cell_start: ndarr,
             sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
             periodic: ti.template()) -> ti.i32:
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     accepted = 0
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         if proposing[i] != 0:
             ok = True
             c = cell_of[i]
@@ -605,12 +605,12 @@ def _relax(pos: ndarr, rad: ndarr, new: ndarr, anchor: ndarr, moved: ndarr, acti
     moved. out[0]: circles that broke the rule before the pass; out[1]: circles now more than
     `slack` from `anchor`, where the cells were built (then they must be built again).
     """
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     key = _draw_key(seed, pass_)
     out[0] = 0
     out[1] = 0
     pieces = _pieces(ncy, ncx)
     for t in range(ncy * pieces):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         cy = t // pieces
         x0, x1 = _piece(t - cy * pieces, pieces, ncx)
         hits = 0
@@ -751,11 +751,11 @@ def _mc_cell(cx0, cy0, pos: ti.template(), rad: ti.template(), cell_start: ti.te
              ncx, ncy, ox, oy, inv_cw, inv_ch, box_w, box_h, key, delta, periodic: ti.template(),
              single: ti.template()):
     """One trial move of each circle of cell (cx0, cy0), one after another; returns how many were kept."""
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     c = cy0 * ncx + cx0
     spans_ = _block(cx0, cy0, cell_start, ncx, ncy, periodic)
     done = 0
     for m in range(cell_start[c], cell_start[c + 1]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         i = sorted_ids[m]
         ri = rad[i]
         h = mix32(mix32(ti.cast(i, ti.u32)) ^ key)
@@ -827,9 +827,9 @@ def _mc_grow(pos: ndarr, rad: ndarr, target: ndarr, scratch: ndarr, cell_of: nda
     A circle takes half of each gap (all of it next to a circle that has its radius, which
     does not grow), less a little against round-off, and stays CLEARANCE inside the walls.
     """
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     short = 0
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         xi = pos[i]
         ri = rad[i]
         allowed = target[i]
@@ -861,9 +861,9 @@ def _mc_grow(pos: ndarr, rad: ndarr, target: ndarr, scratch: ndarr, cell_of: nda
 def _violations(pos: ndarr, rad: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
                 ncy: ti.i32, box_w: ti.f64, box_h: ti.f64, periodic: ti.template()) -> ti.i32:
     """Circles that overlap another (distance below the sum of radii) or cross a wall."""
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     bad = 0
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         xi = pos[i]
         ri = rad[i]
         ok = True

@@ -39,9 +39,9 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, out: ndarr,
                 periodic: ti.template()) -> ti.f64:
     """Largest (r_i + r_j - d_ij) / (r_i + r_j) over all pairs, 0 when none overlap."""
-    box = ti.Vector([box_w, box_h], dt=ti.f64)
     out[0] = 0.0
     for i in range(pos.shape[0]):
+        box = ti.Vector([box_w, box_h], dt=ti.f64)
         c = cell_of[i]
         xi = ti.cast(pos[i], ti.f64)
         for row, seg in ti.ndrange(rows, segs):

@@ -10,6 +10,8 @@ import math
 import numpy as np
 import pytest
 
+from conftest import TEST_ARCH
+
 BOX = (16.0, 9.0)
 WHITE = (255, 255, 255)
 BLACK = (0, 0, 0)
@@ -183,6 +185,7 @@ def test_gpu_layout_draws_the_same_image(canvas, monkeypatch):
     assert (cpu_image == gpu_layout_image).all()
 
 
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the chunked binning stages run on a CPU only")
 def test_cpu_stages_draw_the_same_image_with_any_chunks(canvas, monkeypatch):
     # On a CPU the circles are binned in chunks, with plain increments; with no chunks
     # (too many tiles for their counts) the atomic stages run instead. Circles large

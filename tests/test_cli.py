@@ -24,7 +24,7 @@ SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1
 
 
 def run_cli(args, cwd, **options):
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     return subprocess.run([sys.executable, "-m", "circles.cli", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=120, **options)
 
@@ -57,7 +57,7 @@ def test_scene_file_with_flags_overriding_it(tmp_path):
 
 
 def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     out = tmp_path / "long.gif"
     process = subprocess.Popen(
         [sys.executable, "-m", "circles.cli", "run", *SMALL, "--duration", "1000",

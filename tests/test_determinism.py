@@ -1,22 +1,19 @@
 """Same scene and seed give a bit-identical state: on the CPU with 1 and with
-2 threads, and across save and load. Bit-identical means np.array_equal, no
-tolerance: DESIGN.md asks that nothing feeding the state depends on thread
-timing, so any difference is a race, not round-off.
+2 threads (or in two GPU runs, when the suite runs on the GPU), and across save
+and load. Bit-identical means np.array_equal, no tolerance: DESIGN.md asks that
+nothing feeding the state depends on thread timing, so any difference is a race,
+not round-off.
 
-``ti.init`` is per process, so the thread counts run in separate processes
-that write their states to npz files.
+Each run is a process of its own (see process_util).
 """
 
-import os
-import pathlib
-import subprocess
-import sys
+import json
 import textwrap
 
 import numpy as np
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+from process_util import INIT, compared_runs, run_script
 
 # Scenes that reach the code paths where order could leak in: random sequential
 # placement and lattice-and-melt placement (area fraction 0.75), both schemes,
@@ -40,8 +37,8 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     import circles
 
-    threads, out, scenes = int(sys.argv[1]), sys.argv[2], json.loads(sys.argv[3])
-    circles.init(arch="cpu", cpu_max_num_threads=threads)
+    out, scenes = sys.argv[2], json.loads(sys.argv[3])
+""") + INIT + textwrap.dedent("""
     arrays = {}
     for name, kw in scenes.items():
         duration = kw.pop("duration")
@@ -57,25 +54,15 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def run_in_process(threads, out):
-    import json
-
-    scenes = {name: {k: list(v) if isinstance(v, tuple) else v for k, v in kw.items()}
-              for name, kw in SCENES.items()}
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    done = subprocess.run([sys.executable, "-c", SCRIPT, str(threads), str(out), json.dumps(scenes)],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return np.load(out)
-
-
 def test_same_state_with_1_and_2_threads(tmp_path):
-    one = run_in_process(1, tmp_path / "threads1.npz")
-    two = run_in_process(2, tmp_path / "threads2.npz")
+    scenes = json.dumps({name: {k: list(v) if isinstance(v, tuple) else v for k, v in kw.items()}
+                         for name, kw in SCENES.items()})
+    first, second = compared_runs()
+    one = run_script(SCRIPT, first, tmp_path / "first.npz", scenes, timeout=600)
+    two = run_script(SCRIPT, second, tmp_path / "second.npz", scenes, timeout=600)
     assert sorted(one.files) == sorted(two.files)
     different = [key for key in one.files if not np.array_equal(one[key], two[key])]
-    assert not different, f"differ between 1 and 2 threads: {different}"
+    assert not different, f"differ between runs {first} and {second}: {different}"
     for name in SCENES:
         assert one[f"{name}.counts"][0] > 500  # the runs did collide
 

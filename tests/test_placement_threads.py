@@ -5,20 +5,16 @@ turned down), the jittered lattice with Monte Carlo, and circles that grow back 
 Bit-identical, no tolerance: random numbers come from counters and every sum that feeds a
 position is taken in a fixed order, so any difference is a race.
 
-``ti.init`` is per process, so each thread count runs in its own process and writes the
-positions to an npz file (the pattern of test_determinism.py).
+When the suite runs on the GPU, two GPU runs are compared instead. Each run is a process of
+its own (see process_util).
 """
 
 import json
-import os
-import pathlib
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+from process_util import INIT, compared_runs, run_script
 
 # name -> (n, radius range, area fraction, periodic, float32, method)
 CASES = {
@@ -36,8 +32,8 @@ SCRIPT = textwrap.dedent("""
     import circles
     from circles import placement
 
-    threads, out, cases = int(sys.argv[1]), sys.argv[2], json.loads(sys.argv[3])
-    circles.init(arch="cpu", cpu_max_num_threads=threads)
+    out, cases = sys.argv[2], json.loads(sys.argv[3])
+""") + INIT + textwrap.dedent("""
     arrays = {}
     for name, (n, (rlo, rhi), fraction, periodic, single, how) in cases.items():
         rng = np.random.default_rng(17)
@@ -52,18 +48,10 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def run_in_process(threads, out):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    done = subprocess.run([sys.executable, "-c", SCRIPT, str(threads), str(out), json.dumps(CASES)],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return np.load(out)
-
-
 def test_same_placement_with_1_and_2_threads(tmp_path):
-    one = run_in_process(1, tmp_path / "threads1.npz")
-    two = run_in_process(2, tmp_path / "threads2.npz")
+    first, second = compared_runs()
+    one = run_script(SCRIPT, first, tmp_path / "first.npz", json.dumps(CASES))
+    two = run_script(SCRIPT, second, tmp_path / "second.npz", json.dumps(CASES))
     assert sorted(one.files) == sorted(CASES)
     different = [name for name in CASES if not np.array_equal(one[name], two[name])]
-    assert not different, f"placement differs between 1 and 2 threads: {different}"
+    assert not different, f"placement differs between runs {first} and {second}: {different}"

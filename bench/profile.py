@@ -1,0 +1,75 @@
+"""Where a step's time goes: per-kernel-task times from Taichi's kernel profiler.
+
+    python bench/profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
+
+The bench scene (radius 0.5, area fraction 0.3, 16:9 walled box, speeds 0.5 to 1, float32,
+default dt). For each N and scheme: the scene is built and warmed up by two steps, then
+`steps` steps are timed one by one without the profiler (median and best circle-steps/s),
+then `steps` more with it, and the profiler's table is printed: each row one offloaded task
+of a kernel (on the GPU a task is one device kernel; `serial` tasks run on one thread),
+with its calls and total time. The profiler adds a synchronisation per task, so the timed
+pass, not the profiled one, gives the speed.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+import taichi as ti
+
+import circles
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench import AREA_FRACTION, ASPECT, R, SPEED, box_for  # noqa: E402
+
+
+def profile(n, scheme, steps):
+    scene = circles.Scene(n=n, box=box_for(n, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme,
+                          precision="f32", seed=0)
+    t0 = time.perf_counter()
+    sim = circles.Simulation(scene)
+    place_s = time.perf_counter() - t0
+    sim.step(2)
+    s0 = sim.stats()
+    rounds0 = sim.rounds
+    times = []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        sim.step(1)
+        times.append(time.perf_counter() - t0)
+    s1 = sim.stats()
+    times = np.array(times)
+    pairs = s1["pair_collisions"] - s0["pair_collisions"]
+    print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {n / np.median(times) / 1e6:.3g} M circle-steps/s median, "
+          f"{n / times.min() / 1e6:.3g} M best; {pairs / times.sum() / 1e6:.3g} M collisions/s; "
+          f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change "
+          f"{s1['kinetic_energy'] / s0['kinetic_energy'] - 1:.2e}; largest overlap {s1['max_overlap']:.2e}",
+          flush=True)
+    ti.profiler.clear_kernel_profiler_info()
+    t0 = time.perf_counter()
+    sim.step(steps)
+    ti.sync()
+    wall = time.perf_counter() - t0
+    print(f"profiled pass: {wall / steps * 1e3:.3g} ms per step wall, "
+          f"{ti.profiler.get_kernel_profiler_total_time() / steps * 1e3:.3g} ms per step in tasks", flush=True)
+    ti.profiler.print_kernel_profiler_info("count")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
+    ap.add_argument("--n", type=float, nargs="+", default=[1e6])
+    ap.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=("discrete", "event"))
+    ap.add_argument("--steps", type=int, default=20)
+    args = ap.parse_args(argv)
+    arch = circles.init(arch=args.arch, kernel_profiler=True)
+    print(f"arch {arch}, taichi {'.'.join(map(str, ti.__version__))}", flush=True)
+    for n in args.n:
+        for scheme in args.scheme:
+            profile(int(n), scheme, args.steps)
+
+
+if __name__ == "__main__":
+    main()
