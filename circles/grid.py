@@ -1,8 +1,8 @@
 """Uniform-grid broadphase rebuilt by counting sort.
 
 Stages: cell index and slot of each circle (one atomic add per circle), prefix sum of the
-counts (serial on the CPU), scatter of ids into `sorted_ids`. `cell_start[c]:cell_start[c+1]`
-then lists the circles of cell c. The slot order inside a cell depends on thread timing;
+counts (in chunks and groups of chunks, see `prefix_sum`), scatter of ids into `sorted_ids`.
+`cell_start[c]:cell_start[c+1]` then lists the circles of cell c. The slot order inside a cell depends on thread timing;
 nothing that feeds the state may depend on it, and nothing does (see geometry.key_less).
 
 The cell side is at least the requested reach, so the 3 x 3 block around a circle's cell
@@ -18,8 +18,19 @@ import taichi as ti
 from .geometry import spans
 
 
-#: Cells per chunk of the prefix sum: chunks are summed in parallel, the chunk sums serially.
-PREFIX_CHUNK = 2048
+#: Cells per chunk of the prefix sum (one thread sums a chunk), on a CPU and on a GPU: a GPU
+#: runs many more threads, each slower, so its chunks are shorter.
+PREFIX_CHUNK = {"cpu": 2048, "gpu": 256}
+#: Chunks per group: the chunk totals are summed within groups in parallel, and only the group
+#: totals one after another (a serial pass of cells / (chunk x group) items).
+PREFIX_GROUP = {"cpu": 64, "gpu": 1024}
+
+
+def _scan_shape():
+    """(chunk, group) of the prefix sum for the arch Taichi runs on (read when a kernel compiles)."""
+    arch = ti.lang.impl.current_cfg().arch
+    key = "cpu" if arch in (ti.x64, ti.arm64) else "gpu"
+    return PREFIX_CHUNK[key], PREFIX_GROUP[key]
 
 
 @ti.func
@@ -72,29 +83,40 @@ def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.tem
 def prefix_sum(count: ti.template(), start: ti.template(), ncells):
     """start[c] = count[0] + ... + count[c - 1] for c <= ncells, and count[:ncells] set to 0.
 
-    Three passes: chunk sums in parallel (kept in start[c] at each chunk's end), their running
-    sum serially (one item per chunk), then each chunk's starts in parallel.
+    Integer sums, so the result is exact whatever the order. Passes (each loop one task):
+    1. each chunk's total, kept in start[] at the chunk's end;
+    2. within each group of chunks, the running total at each chunk end;
+    3. serially, each group's end gets the total of all groups before it;
+    4. the other chunk ends get the total of the groups before theirs;
+    5. each chunk's starts from its (now final) first start, and its counts cleared.
     """
-    nchunks = (ncells + PREFIX_CHUNK - 1) // PREFIX_CHUNK
+    chunk, group = ti.static(_scan_shape())
+    nchunks = (ncells + chunk - 1) // chunk
+    ngroups = (nchunks + group - 1) // group
     for b in range(nchunks):
-        lo = b * PREFIX_CHUNK
-        hi = ti.min(lo + PREFIX_CHUNK, ncells)
+        lo = b * chunk
+        hi = ti.min(lo + chunk, ncells)
         total = 0
         for c in range(lo, hi):
             total += count[c]
         start[hi] = total
+    for g in range(ngroups):
+        running = 0
+        for b in range(g * group, ti.min((g + 1) * group, nchunks)):
+            hi = ti.min((b + 1) * chunk, ncells)
+            running += start[hi]
+            start[hi] = running
     ti.loop_config(serialize=True)
-    for b in range(nchunks):
-        # start[hi of b] becomes the total of chunks 0..b; start[0] = 0.
-        hi = ti.min((b + 1) * PREFIX_CHUNK, ncells)
-        before = 0
-        if b > 0:
-            before = start[b * PREFIX_CHUNK]
-        start[hi] = before + start[hi]
+    for g in range(1, ngroups):
+        start[ti.min((g + 1) * group * chunk, ncells)] += start[g * group * chunk]
     start[0] = 0
     for b in range(nchunks):
-        lo = b * PREFIX_CHUNK
-        hi = ti.min(lo + PREFIX_CHUNK, ncells)
+        g = b // group
+        if g > 0 and (b + 1) % group != 0 and b != nchunks - 1:
+            start[(b + 1) * chunk] += start[g * group * chunk]
+    for b in range(nchunks):
+        lo = b * chunk
+        hi = ti.min(lo + chunk, ncells)
         running = start[lo]
         for c in range(lo, hi - 1):
             running += count[c]
