@@ -33,6 +33,15 @@ def _scan_shape():
     return PREFIX_CHUNK[key], PREFIX_GROUP[key]
 
 
+def _warp_fill():
+    """Whether the last pass of the prefix sum runs one warp per chunk (CUDA only)."""
+    return ti.lang.impl.current_cfg().arch == ti.cuda
+
+
+#: Lanes of a CUDA warp.
+WARP = 32
+
+
 @ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
@@ -88,7 +97,8 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells):
     2. within each group of chunks, the running total at each chunk end;
     3. serially, each group's end gets the total of all groups before it;
     4. the other chunk ends get the total of the groups before theirs;
-    5. each chunk's starts from its (now final) first start, and its counts cleared.
+    5. each chunk's starts from its (now final) first start, and its counts cleared (on CUDA
+       one warp per chunk, see `_warp_fill_starts`).
     """
     chunk, group = ti.static(_scan_shape())
     nchunks = (ncells + chunk - 1) // chunk
@@ -114,15 +124,52 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells):
         g = b // group
         if g > 0 and (b + 1) % group != 0 and b != nchunks - 1:
             start[(b + 1) * chunk] += start[g * group * chunk]
-    for b in range(nchunks):
+    if ti.static(_warp_fill()):
+        _warp_fill_starts(count, start, ncells, nchunks, chunk)
+    else:
+        for b in range(nchunks):
+            lo = b * chunk
+            hi = ti.min(lo + chunk, ncells)
+            running = start[lo]
+            for c in range(lo, hi - 1):
+                running += count[c]
+                start[c + 1] = running
+                count[c] = 0
+            count[hi - 1] = 0
+
+
+@ti.func
+def _warp_fill_starts(count: ti.template(), start: ti.template(), ncells, nchunks, chunk: ti.template()):
+    """Pass 5 of `prefix_sum` on CUDA: one warp per chunk, 32 cells at a time, so that the
+    loads and stores of a warp are one contiguous run (one thread per chunk writes 32 runs).
+
+    Each lane takes one cell; a scan by register shuffles gives the sums within the 32, and
+    the running total of the chunk is carried from lane 31. The loop covers whole warps
+    (nchunks * 32 items, thread blocks a multiple of 32), so every lane takes part in every
+    shuffle; lanes past the chunk's end add 0 and write nothing.
+    """
+    full = ti.u32(0xFFFFFFFF)
+    ti.loop_config(block_dim=128)
+    for t in range(nchunks * WARP):
+        b = t // WARP
+        lane = t % WARP
         lo = b * chunk
         hi = ti.min(lo + chunk, ncells)
-        running = start[lo]
-        for c in range(lo, hi - 1):
-            running += count[c]
-            start[c + 1] = running
-            count[c] = 0
-        count[hi - 1] = 0
+        carry = start[lo]
+        for s in range((chunk + WARP - 1) // WARP):
+            c = lo + s * WARP + lane
+            x = 0
+            if c < hi:
+                x = count[c]
+            for d in ti.static((1, 2, 4, 8, 16)):
+                y = ti.simt.warp.shfl_up_i32(full, x, d)
+                if lane >= d:
+                    x += y
+            if c < hi - 1:
+                start[c + 1] = carry + x
+            if c < hi:
+                count[c] = 0
+            carry += ti.simt.warp.shfl_sync_i32(full, x, WARP - 1)
 
 
 @ti.kernel
