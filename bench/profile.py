@@ -43,7 +43,8 @@ def profile(n, scheme, steps):
     times = np.array(times)
     pairs = s1["pair_collisions"] - s0["pair_collisions"]
     print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {n / np.median(times) / 1e6:.3g} M circle-steps/s median, "
-          f"{n / times.min() / 1e6:.3g} M best; {pairs / times.sum() / 1e6:.3g} M collisions/s; "
+          f"{n / times.min() / 1e6:.3g} M best; {pairs / times.sum() / 1e6:.3g} M collisions/s "
+          f"({pairs / (n * steps):.3g} per circle-step); "
           f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change "
           f"{s1['kinetic_energy'] / s0['kinetic_energy'] - 1:.2e}; largest overlap {s1['max_overlap']:.2e}",
           flush=True)
