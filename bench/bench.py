@@ -39,8 +39,10 @@ What is measured, all in one run and one process:
 import argparse
 import csv
 import datetime
+import hashlib
 import math
 import os
+import pathlib
 import platform
 import re
 import statistics
@@ -130,17 +132,27 @@ def gpu_model():
     return "gpu"
 
 
+def source_hash(root):
+    """A hash of the engine's source (circles/*.py): names the engine also where no git metadata is."""
+    h = hashlib.sha1()
+    for path in sorted(pathlib.Path(root, "circles").glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()[:10]
+
+
 def engine_revision():
-    """The commit of the engine under test, marked when circles/ has uncommitted changes (read-only git calls)."""
+    """The commit of the engine under test, marked when circles/ has uncommitted changes (read-only git
+    calls), and the hash of its source."""
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
                               timeout=20).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--", "circles"], cwd=root, capture_output=True,
                                text=True, timeout=20).stdout.strip()
+        commit = (head or "unknown") + (" with uncommitted changes to circles/" if dirty else "")
     except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return (head or "unknown") + (" with uncommitted changes to circles/" if dirty else "")
+        commit = "unknown"
+    return f"{commit} (circles/ source hash {source_hash(root)})"
 
 
 def box_for(n, fraction, aspect):
@@ -613,7 +625,11 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
              f"Machine: {meta['machine_name']}, {meta['cores']} cores; arch {meta['arch']}; taichi {meta['taichi']}, "
              f"pymunk {meta['pymunk']}, numpy {np.__version__}, Python {platform.python_version()}  ",
              f"Wall time of the whole run: {meta['wall_s']:.0f} s. Timings are noisy (a shared machine): "
-             "medians with min and max over repeats.", "",
+             "medians with min and max over repeats.", ""]
+    if meta.get("partial"):
+        lines += [f"**Partial:** written after the section `{meta['partial']}`; the run did not reach its end "
+                  "(the sections after it are missing).", ""]
+    lines += [
              "Scene of the throughput and peer rows: circles of radius "
              f"{R} at area fraction {AREA_FRACTION} in a 16:9 walled box, speeds uniform in {SPEED}, "
              "mass = radius, default dt (event: the fastest circle moves 0.3 mean radii per step; discrete: 0.2 smallest radii).", ""]
@@ -760,7 +776,31 @@ def main(argv=None):
     log("  first runs (compilation): " + ", ".join(f"{c['scheme']} {c['precision']} {c['first_run_s']:.2f} s"
                                                   for c in compile_rows))
 
-    throughput, render, placement = [], [], []
+    throughput, render, placement, memory, spreads, peers, ratios, wp = [], [], [], [], [], [], [], []
+    command = "python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:])
+
+    def save(section, final=False):
+        """Write every table so far: a run stopped later still leaves what it measured."""
+        version = ti.__version__
+        meta = dict(machine_name=machine_name, cores=os.cpu_count(), arch=arch,
+                    taichi=".".join(map(str, version)) if isinstance(version, tuple) else str(version),
+                    pymunk=pymunk_version(), revision=engine_revision(), command=command,
+                    date=datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"), wall_s=now() - start,
+                    partial=None if final else section)
+        write_csv(os.path.join(outdir, "bandwidth.csv"), bandwidth)
+        write_csv(os.path.join(outdir, "throughput.csv"), throughput)
+        write_csv(os.path.join(outdir, "placement.csv"), placement)
+        write_csv(os.path.join(outdir, "render.csv"), render)
+        write_csv(os.path.join(outdir, "compile.csv"), compile_rows)
+        write_csv(os.path.join(outdir, "peers.csv"), peers + [dict(peer="ratio circles/pymunk", **r) for r in ratios])
+        write_csv(os.path.join(outdir, "work_precision.csv"), wp)
+        write_csv(os.path.join(outdir, "memory.csv"), memory)
+        write_csv(os.path.join(outdir, "spread.csv"), spreads)
+        if wp and final:
+            guarded("plot", plot_work_precision, wp, os.path.join(outdir, "work_precision.png"))
+        write_markdown(os.path.join(outdir, "results.md"), meta, compile_rows, bandwidth, throughput, placement,
+                       render, peers, ratios, wp, errors, memory, spreads)
+
     if "throughput" not in skip:
         log("throughput")
         for n in cfg["sizes"]:
@@ -784,6 +824,7 @@ def main(argv=None):
                             render.append(r)
                             log(f"  render N={n}: {r['frame_s_median']:.3g} s per 1920x1080 frame")
                     del sim
+                    save(f"throughput N={n} {scheme} {precision}")
         # Placement at 0.3: every throughput row built its scene (same seed, so the same placement).
         for n in cfg["sizes"]:
             ts = [t["place_s"] for t in throughput if t["n"] == n]
@@ -812,7 +853,7 @@ def main(argv=None):
                 log(f"  fraction {fraction}: {p['place_s_median']:.3g} s [{p['place_s_min']:.3g}, "
                     f"{p['place_s_max']:.3g}], largest overlap {p['max_overlap']:.3g}")
 
-    memory, spreads = [], []
+    save("placement")
     if "memory" not in skip:
         log("memory")
         for n in cfg["memory_sizes"]:
@@ -831,7 +872,7 @@ def main(argv=None):
                     spreads.append(sp)
                     log(f"  N={n} {scheme}: 1:{SPREAD_RATIO:g} mixture costs {sp['cost_ratio']:.2f}x equal radii")
 
-    peers, ratios = [], []
+    save("spread")
     if "peers" not in skip:
         log("peer: pymunk")
         for n in cfg["peer_sizes"]:
@@ -850,29 +891,12 @@ def main(argv=None):
                                        circle_steps_ratio=t["circle_steps_per_s_median"] / p["circle_steps_per_s_median"],
                                        sim_time_ratio=t["sim_time_per_wall_s"] / p["sim_time_per_wall_s"]))
 
-    wp = []
+    save("peers")
     if "wp" not in skip:
         log("work-precision")
-        wp = guarded("work-precision", work_precision, cfg) or []
+        wp.extend(guarded("work-precision", work_precision, cfg) or [])
 
-    version = ti.__version__
-    meta = dict(machine_name=machine_name, cores=os.cpu_count(), arch=arch,
-                taichi=".".join(map(str, version)) if isinstance(version, tuple) else str(version),
-                pymunk=pymunk_version(), revision=engine_revision(), command="python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:]),
-                date=datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"), wall_s=now() - start)
-    write_csv(os.path.join(outdir, "bandwidth.csv"), bandwidth)
-    write_csv(os.path.join(outdir, "throughput.csv"), throughput)
-    write_csv(os.path.join(outdir, "placement.csv"), placement)
-    write_csv(os.path.join(outdir, "render.csv"), render)
-    write_csv(os.path.join(outdir, "compile.csv"), compile_rows)
-    write_csv(os.path.join(outdir, "peers.csv"), peers + [dict(peer="ratio circles/pymunk", **r) for r in ratios])
-    write_csv(os.path.join(outdir, "work_precision.csv"), wp)
-    write_csv(os.path.join(outdir, "memory.csv"), memory)
-    write_csv(os.path.join(outdir, "spread.csv"), spreads)
-    if wp:
-        guarded("plot", plot_work_precision, wp, os.path.join(outdir, "work_precision.png"))
-    write_markdown(os.path.join(outdir, "results.md"), meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios,
-                   wp, errors, memory, spreads)
+    save("work-precision", final=True)
     log(f"done in {now() - start:.0f} s: {outdir}")
     return 1 if errors else 0
 
