@@ -35,7 +35,7 @@ def scan_with(chunk, group):
     return run
 
 
-@pytest.mark.parametrize("chunk,group", [(3, 2), (5, 4), (1, 1), (2048, 64), (256, 1024)])
+@pytest.mark.parametrize("chunk,group", [(3, 2), (5, 4), (1, 1), (2048, 64), (256, 1024), (3, 0), (2048, 0)])
 @pytest.mark.parametrize("ncells", [1, 2, 7, 30, 31, 500, 20011])
 def test_prefix_sum_matches_numpy(circles_cpu, chunk, group, ncells):
     counts = np.random.default_rng(ncells).integers(0, 5, ncells)
