@@ -1,6 +1,6 @@
 """Where a step's time goes: per-kernel-task times from Taichi's kernel profiler.
 
-    python bench/profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
+    python bench/kernel_profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
 
 The bench scene (radius 0.5, area fraction 0.3, 16:9 walled box, speeds 0.5 to 1, float32,
 default dt). For each N and scheme: the scene is built and warmed up by two steps, then
@@ -8,7 +8,7 @@ default dt). For each N and scheme: the scene is built and warmed up by two step
 then `steps` more with it, and the profiler's table is printed: each row one offloaded task
 of a kernel (on the GPU a task is one device kernel; `serial` tasks run on one thread),
 with its calls and total time. The profiler adds a synchronisation per task, so the timed
-pass, not the profiled one, gives the speed.
+pass, not the profiled one, gives the speed. `bench/versus.py` times steps the same way.
 """
 
 import argparse
@@ -25,29 +25,37 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench import AREA_FRACTION, ASPECT, R, SPEED, box_for  # noqa: E402
 
 
-def profile(n, scheme, steps):
-    scene = circles.Scene(n=n, box=box_for(n, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme,
-                          precision="f32", seed=0)
-    t0 = time.perf_counter()
-    sim = circles.Simulation(scene)
-    place_s = time.perf_counter() - t0
-    sim.step(2)
-    s0 = sim.stats()
-    rounds0 = sim.rounds
+def bench_scene(n, scheme, seed=0):
+    """The throughput rows' scene of bench.py, float32."""
+    return circles.Scene(n=n, box=box_for(n, AREA_FRACTION, ASPECT), radius=R, speed=SPEED, scheme=scheme,
+                         precision="f32", seed=seed)
+
+
+def time_steps(sim, steps):
+    """Times `steps` single steps; returns (seconds per step, pair collisions, relative energy
+    change, largest overlap at the end)."""
+    start = sim.stats()
     times = []
     for _ in range(steps):
         t0 = time.perf_counter()
         sim.step(1)
         times.append(time.perf_counter() - t0)
-    s1 = sim.stats()
-    times = np.array(times)
-    pairs = s1["pair_collisions"] - s0["pair_collisions"]
+    end = sim.stats()
+    return (np.array(times), end["pair_collisions"] - start["pair_collisions"],
+            end["kinetic_energy"] / start["kinetic_energy"] - 1, end["max_overlap"])
+
+
+def profile(n, scheme, steps):
+    t0 = time.perf_counter()
+    sim = circles.Simulation(bench_scene(n, scheme))
+    place_s = time.perf_counter() - t0
+    sim.step(2)
+    rounds0 = sim.rounds
+    times, pairs, energy_change, overlap = time_steps(sim, steps)
     print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {n / np.median(times) / 1e6:.3g} M circle-steps/s median, "
-          f"{n / times.min() / 1e6:.3g} M best; {pairs / times.sum() / 1e6:.3g} M collisions/s "
-          f"({pairs / (n * steps):.3g} per circle-step); "
-          f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change "
-          f"{s1['kinetic_energy'] / s0['kinetic_energy'] - 1:.2e}; largest overlap {s1['max_overlap']:.2e}",
-          flush=True)
+          f"{n / times.min() / 1e6:.3g} M best; {pairs / (n * steps):.3g} collisions per circle-step; "
+          f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change {energy_change:.2e}; "
+          f"largest overlap {overlap:.2e}", flush=True)
     ti.profiler.clear_kernel_profiler_info()
     t0 = time.perf_counter()
     sim.step(steps)

@@ -3,8 +3,8 @@
     python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
 
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
-same scene (area fraction 0.3, walls, f32, radius 0.5, speeds in (0.5, 1.0), default dt, seed 1)
-in fresh processes, alternating base and this tree `--rounds` times, so that the load of a
+same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
+in (0.5, 1.0), default dt; seed 1) in fresh processes, alternating base and this tree `--rounds` times, so that the load of a
 shared machine falls on both alike; each process times single steps after 16 warm-up steps
 (which compile every kernel, the periodic reorder's included).
 Reported: median circle-steps/s of each engine with [min, max] over all its timed steps, the
@@ -24,26 +24,20 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 
+#: One engine's run: the scene and the step timing of kernel_profile.py (from this tree's bench/,
+#: whichever engine `circles` is imported from).
 CHILD = """
-import json, sys, time, math
+import json, sys
 import numpy as np
 import circles
 n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+sys.path.insert(0, sys.argv[4])
+from kernel_profile import bench_scene, time_steps
 circles.init(arch="cpu")
-r, fraction = 0.5, 0.3
-side = math.sqrt(n * math.pi * r * r / fraction)
-sim = circles.Simulation(circles.Scene(n=n, box=(side * 4 / 3, side * 3 / 4), radius=r, speed=(0.5, 1.0),
-                                       scheme=scheme, precision="f32", seed=1))
+sim = circles.Simulation(bench_scene(n, scheme, seed=1))
 sim.step(16)  # compiles every kernel of a step, the reorder of every 16th step included
-start = sim.stats()
-times = []
-for _ in range(steps):
-    t = time.perf_counter()
-    sim.step(1)
-    times.append(time.perf_counter() - t)
-end = sim.stats()
-print(json.dumps({"times": times, "pairs": end["pair_collisions"] - start["pair_collisions"],
-                  "energy_change": end["kinetic_energy"] / start["kinetic_energy"] - 1}))
+times, pairs, energy_change, _ = time_steps(sim, steps)
+print(json.dumps({"times": times.tolist(), "pairs": int(pairs), "energy_change": energy_change}))
 """
 
 
@@ -60,8 +54,8 @@ def export(ref, into):
 
 def run(tree, n, scheme, steps):
     env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps)], capture_output=True, text=True,
-                         env=env, cwd=str(tree), check=True)
+    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench")],
+                         capture_output=True, text=True, env=env, cwd=str(tree), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
