@@ -163,8 +163,7 @@ class Simulation:
         return sim
 
     # ----------------------------------------------------------------- set-up
-    def _setup(self, pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events,
-               need_event=False):
+    def _setup(self, pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events):
         n = radius.shape[0]
         self.n = n
         self.box = (float(box[0]), float(box[1]))
@@ -212,8 +211,7 @@ class Simulation:
         self._log_t = ti.ndarray(ti.f64, shape=cap)
         self._log_i = ti.ndarray(ti.i32, shape=cap)
         self._log_j = ti.ndarray(ti.i32, shape=cap)
-        self._event_arrays = False
-        if scheme == "event" or need_event:
+        if scheme == "event":
             self._alloc_event_arrays()
         if scheme == "discrete":
             self._partner = ti.ndarray(ti.i32, shape=n)
@@ -228,8 +226,6 @@ class Simulation:
                 reductions.fill_i32(arr, 0)
 
     def _alloc_event_arrays(self):
-        if self._event_arrays:
-            return
         n, real = self.n, self._real
         self.tau = ti.ndarray(real, shape=n)
         reductions.fill_real(self.tau, 0.0)
@@ -242,7 +238,6 @@ class Simulation:
         reductions.fill_i32(self._active[1], 0)
         self._backup = {name: self._like(getattr(self, name))
                         for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
-        self._event_arrays = True
 
     @staticmethod
     def _like(arr):
