@@ -353,6 +353,22 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
                  r % 2)
 
 
+@ti.func
+def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                       ids: ti.template(), partner: ti.template(), picked: ti.template(), marked: ti.template(),
+                       contacts: ti.template(), n_contacts: ti.template(), lists: ti.template(), work: ti.template(),
+                       pair_count: ti.template(), virial: ti.template(), wall_count: ti.template(),
+                       wall_impulse: ti.template(), walled: ti.template(), cell_of: ti.template(),
+                       cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+                       real: ti.template(), periodic: ti.template(), rounds: ti.template()):
+    """`rounds` rounds, then the wall reflections if they settled (the end of both launches)."""
+    _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
+            rounds)
+    if ti.static(not periodic):
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+
+
 @ti.kernel
 def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
                marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
@@ -370,11 +386,9 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
-    _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
-            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
-            rounds)
-    if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+    _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
+                       pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
+                       rows, segs, box_w, box_h, real, periodic, rounds)
     return work[LIST0]
 
 
@@ -386,9 +400,7 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
                 real: ti.template(), periodic: ti.template(), rounds: ti.template()) -> ti.i32:
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
-    _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
-            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
-            rounds)
-    if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+    _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
+                       pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
+                       rows, segs, box_w, box_h, real, periodic, rounds)
     return work[LIST0]
