@@ -88,7 +88,7 @@ FULL = dict(
     copy_numbers=1 << 27, copy_reps=10,
     wp_n=2000, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0),
     memory_sizes=(1_000_000, 10_000_000), spread_sizes=(10_000, 100_000))
-#: With --arch gpu: sizes up to 1e8 in float32 (the GPU targets), no pymunk (a CPU peer), no
+#: With --arch gpu: sizes up to 1e8 in float32, no pymunk (a CPU peer), no
 #: resident-memory rows (they measure host memory) and no work-precision (a CPU-size study).
 GPU = dict(
     sizes=(10_000, 100_000, 1_000_000, 10_000_000, 100_000_000), event_sizes=(100_000, 1_000_000, 10_000_000),
