@@ -2,8 +2,9 @@
 
 Stages: cell index and slot of each circle (one atomic add per circle), prefix sum of the
 counts (in chunks and groups of chunks, see `prefix_sum`), scatter of ids into `sorted_ids`.
-`cell_start[c]:cell_start[c+1]` then lists the circles of cell c. The slot order inside a cell depends on thread timing;
-nothing that feeds the state may depend on it, and nothing does (see geometry.key_less).
+`cell_start[c]:cell_start[c+1]` then lists the circles of cell c. The slot order inside a
+cell depends on thread timing; nothing that feeds the state may depend on it, and nothing
+does (see geometry.key_less).
 
 The cell side is at least the requested reach, so the 3 x 3 block around a circle's cell
 holds every circle within that reach. The number of cells is capped (`max_cells`): when the
@@ -23,8 +24,8 @@ from .geometry import spans
 PREFIX_CHUNK = {"cpu": 2048, "gpu": 256}
 #: Chunks per group: the chunk totals are summed within groups in parallel, and only the group
 #: totals one after another (a serial pass of cells / (chunk x group) items). 0: one serial
-#: pass over the chunk totals, two tasks fewer (on a CPU it covers cells / 2048 items, about a
-#: microsecond per thousand, and at small N a step is mostly such task dispatches).
+#: pass over the chunk totals and two tasks fewer. That suits a CPU: its serial pass covers
+#: cells / 2048 items, and at small N a step costs mostly its task dispatches.
 PREFIX_GROUP = {"cpu": 0, "gpu": 1024}
 
 
