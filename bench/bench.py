@@ -4,7 +4,10 @@
 
 Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
 throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, peers.csv, work_precision.csv,
-results.md (every table, with the command and the date) and work_precision.png.
+results.md (every table, with the command and the date) and work_precision.png. The tables
+are rewritten after every section, so a run stopped early leaves what it measured. With
+--arch gpu the sizes go up to 1e8 in float32, and the pymunk, memory and work-precision
+sections are left out (see GPU below).
 
 What is measured, all in one run and one process:
 
