@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "bench"))
+from bench import engine_revision  # noqa: E402  (the name bench.py gives the engine in its tables)
 
 #: One engine's run: the scene and the step timing of kernel_profile.py (from this tree's bench/,
 #: whichever engine `circles` is imported from).
@@ -66,12 +68,8 @@ def main():
     parser.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=["discrete", "event"])
     parser.add_argument("--rounds", type=int, default=3, help="processes per engine and row, alternating")
     args = parser.parse_args()
-    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                          check=True).stdout.strip()
-    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "circles"], capture_output=True,
-                           text=True, check=True).stdout.strip()
-    this = f"{head}{' + uncommitted changes' if dirty else ''}"
-    print(f"base {args.base} against this tree ({this}); area fraction 0.3, walls, f32, default dt\n")
+    print(f"base {args.base} against this tree ({engine_revision()}); area fraction 0.3, walls, f32, "
+          "default dt\n")
     print("| N | scheme | base circle-steps/s | this circle-steps/s | ratio | base pairs, energy change "
           "| this pairs, energy change |")
     print("|---|---|---|---|---|---|---|")
