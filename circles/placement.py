@@ -61,7 +61,7 @@ import numpy as np
 import taichi as ti
 
 from .geometry import displacement, neighbour_range
-from .grid import Grid
+from .grid import Grid, prefix_sum
 from .scene import DENSEST_PACKING
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -456,11 +456,10 @@ def _build_cells(pos: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cel
                  ncx: ti.i32, ncy: ti.i32, ox: ti.f64, oy: ti.f64, inv_cw: ti.f64, inv_ch: ti.f64, box_w: ti.f64,
                  box_h: ti.f64, anchor: ndarr, periodic: ti.template(), keep: ti.template()):
     """Cell lists by counting sort, each cell's circles in increasing index (not in atomic slot order).
+    `cell_count` is zero on entry and left zero.
 
     With `keep`, anchor[i] = pos[i]: where each circle was when the cells were built.
     """
-    for c in range(ncx * ncy):
-        cell_count[c] = 0
     for i in range(pos.shape[0]):
         if ti.static(keep):
             anchor[i] = pos[i]
@@ -468,10 +467,7 @@ def _build_cells(pos: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cel
         c = cy * ncx + cx
         cell_of[i] = c
         slot[i] = ti.atomic_add(cell_count[c], 1)
-    cell_start[0] = 0
-    ti.loop_config(serialize=True)
-    for c in range(ncx * ncy):
-        cell_start[c + 1] = cell_start[c] + cell_count[c]
+    prefix_sum(cell_count, cell_start, ncx * ncy)  # the grid's scan, which leaves the counts zeroed
     for i in range(pos.shape[0]):
         sorted_ids[cell_start[cell_of[i]] + slot[i]] = i
     for c in range(ncx * ncy):
@@ -513,6 +509,7 @@ class _Cells:
         self.slot = ti.ndarray(ti.i32, shape=n)
         self.sorted_ids = ti.ndarray(ti.i32, shape=n)
         self.cell_count = ti.ndarray(ti.i32, shape=ncells)
+        self.cell_count.fill(0)  # and zero after every build (see grid.prefix_sum)
         self.cell_start = ti.ndarray(ti.i32, shape=ncells + 1)
         self.ox = self.oy = 0.0
 
