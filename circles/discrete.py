@@ -57,7 +57,7 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
             if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
                 walled[ti.atomic_add(work[WALLED], 1)] = i
         pos[i] = x
-        enter_cell(i, x, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch)
+        enter_cell(i, x, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
 
 
 @ti.func
@@ -114,7 +114,16 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
         rnd = work[ROUND]
         i = sorted_ids[own]
         c = cell_of[i]
-        if forward:
+        if ti.static(not periodic):
+            # Two runs of slots (`forward_range`) walked as one loop: one exit branch, not two.
+            a_hi = cell_start[c + 2]
+            b_lo, b_hi = forward_range(1, c, 0, 0, own, cell_start, ncx, ncy, periodic)
+            n_a = a_hi - own - 1
+            for m in range(n_a + b_hi - b_lo):
+                k = own + 1 + m if m < n_a else b_lo + m - n_a
+                _record_contact(i, sorted_ids[k], pos, vel, radius, contacts, n_contacts, marked, lists, work,
+                                rnd, box, periodic)
+        elif forward:
             cy = c // ncx
             cx = c - cy * ncx
             for q in ti.static(range(forward_parts(periodic))):
@@ -383,7 +392,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     rounds are needed (the walls wait for them)."""
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
           box_w, box_h, real, periodic)
-    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
+    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,

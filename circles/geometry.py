@@ -41,21 +41,51 @@ def key_less(t1, a1, b1, t2, a2, b2):
     return less
 
 
+def cell_total(ncx: int, ncy: int, periodic: bool) -> int:
+    """Cells in the layout of an ncx x ncy grid (see `cell_index`): cell_start has one more entry."""
+    return ncx * ncy if periodic else (ncy + 2) * (ncx + 1) + 1
+
+
+@ti.func
+def cells_in(ncx, ncy, periodic: ti.template()):
+    """`cell_total` inside a kernel."""
+    total = ncx * ncy
+    if ti.static(not periodic):
+        total = (ncy + 2) * (ncx + 1) + 1
+    return total
+
+
+@ti.func
+def cell_index(cx, cy, ncx, periodic: ti.template()):
+    """The number of cell (cx, cy), 0 <= cx < ncx, 0 <= cy < ncy.
+
+    Periodic: row-major, cy * ncx + cx. Walled: row-major in a frame of cells that stay empty,
+    rows of ncx + 1 cells whose first is empty, and an empty row below and above. So the
+    neighbours of a cell are at fixed offsets (c - 1, c + 1, c -+ (ncx + 1)) with no test
+    for the edge: past an edge lies an empty cell. Cell ranges need no cell coordinates.
+    """
+    c = cy * ncx + cx
+    if ti.static(not periodic):
+        c = (cy + 1) * (ncx + 1) + cx + 1
+    return c
+
+
 @ti.func
 def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: ti.template()):
     """Slots [k_lo, k_hi) of `sorted_ids` in segment `seg` of row `row` of the 3 x 3 cells around c.
 
     The three cells of a row are consecutive cell numbers, so a row is one contiguous run of
-    slots: three ranges per circle instead of nine. In a periodic box a row that wraps
-    around the edge splits into two runs (seg 0 and 1); with fewer than 3 cells along an
-    axis the rows and runs cover each cell once, so no pair is seen twice. `row` runs over
-    range(rows) and `seg` over range(segs), with (rows, segs) from `spans`.
+    slots: three ranges per circle instead of nine. In a walled box the empty frame of the
+    layout (`cell_index`) takes the place of cells past the edge. In a periodic box a row
+    that wraps around the edge splits into two runs (seg 0 and 1); with fewer than 3 cells
+    along an axis the rows and runs cover each cell once, so no pair is seen twice. `row`
+    runs over range(rows) and `seg` over range(segs), with (rows, segs) from `spans`.
     """
-    cx = c % ncx
-    cy = c // ncx
     lo = 0
     hi = 0
     if ti.static(periodic):
+        cx = c % ncx
+        cy = c // ncx
         ny = (cy + row - (1 if ncy >= 3 else 0) + ncy) % ncy
         first = ny * ncx
         if ncx < 3:
@@ -77,10 +107,9 @@ def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: 
             elif seg == 0:
                 lo, hi = first + x0, first + x1
     else:
-        ny = cy + row - 1
-        if 0 <= ny < ncy:
-            lo = ny * ncx + ti.max(cx - 1, 0)
-            hi = ny * ncx + ti.min(cx + 2, ncx)
+        mid = c + (row - 1) * (ncx + 1)
+        lo = mid - 1
+        hi = mid + 2
     return cell_start[lo], cell_start[hi]
 
 
@@ -91,9 +120,10 @@ def forward_range(q, c, cx, cy, own, cell_start: ti.template(), ncx, ncy, period
     The forward half of the circle in slot `own` of cell c: the later slots of c, the cell to
     its right and the three cells of the row above. Each pair of circles in neighbouring
     cells lies in the forward half of exactly one of its two circles, so a search over the
-    forward halves sees every pair once. Parts: 2 in a walled box (the own row is one run),
-    4 in a periodic box (own cell, right cell, and the row above in up to two runs), where it
-    needs at least 3 cells along each axis (`forward_fits`).
+    forward halves sees every pair once. Parts: 2 in a walled box (the own row is one run;
+    cx and cy are not read, see `cell_index`), 4 in a periodic box (own cell, right cell,
+    and the row above in up to two runs), where it needs at least 3 cells along each axis
+    (`forward_fits`).
     """
     lo = own + 1
     hi = own + 1
@@ -107,14 +137,9 @@ def forward_range(q, c, cx, cy, own, cell_start: ti.template(), ncx, ncy, period
             lo, hi = neighbour_range(c, 2, q - 2, cell_start, ncx, ncy, periodic)
     else:
         if q == 0:
-            hi = cell_start[c + (2 if cx + 2 <= ncx else 1)]
+            hi = cell_start[c + 2]
         else:
-            lo = 0
-            hi = 0
-            if cy + 1 < ncy:
-                above = c + ncx
-                lo = cell_start[above - (1 if cx > 0 else 0)]
-                hi = cell_start[above + (2 if cx + 2 <= ncx else 1)]
+            lo, hi = neighbour_range(c, 2, 0, cell_start, ncx, ncy, periodic)
     return lo, hi
 
 

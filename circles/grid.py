@@ -2,7 +2,9 @@
 
 Stages: cell index and slot of each circle (one atomic add per circle), prefix sum of the
 counts (in chunks and groups of chunks, see `prefix_sum`), scatter of ids into `sorted_ids`.
-`cell_start[c]:cell_start[c+1]` then lists the circles of cell c. The slot order inside a
+`cell_start[c]:cell_start[c+1]` then lists the circles of cell c, numbered as
+`geometry.cell_index` says (in a walled box inside a frame of empty cells, so that
+neighbouring cells are at fixed offsets with no edge tests). The slot order inside a
 cell depends on thread timing; nothing that feeds the state may depend on it, and nothing
 does (see geometry.key_less).
 
@@ -16,7 +18,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .geometry import spans
+from .geometry import cell_index, cell_total, cells_in, spans
 
 
 #: Cells per chunk of the prefix sum (one thread sums a chunk), on a CPU and on a GPU: a GPU
@@ -48,7 +50,7 @@ WARP = 32
 @ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
-                inv_ch, masked: ti.template()):
+                inv_ch, masked: ti.template(), periodic: ti.template()):
     """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel.
 
     `cell_count` must be all zero on entry; it is left all zero (each chunk clears its counts
@@ -59,15 +61,15 @@ def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template
         if ti.static(masked):
             use = include[i] != 0
         if use:
-            enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch)
+            enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
         else:
             cell_of[i] = -1
-    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy)
+    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic)
 
 
 @ti.func
 def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), ncx, ncy, inv_cw,
-               inv_ch):
+               inv_ch, periodic: ti.template()):
     """Count circle i, at p, into its cell (the first stage, for a scheme to fuse into its own pass)."""
     # Positions may sit a round-off outside the box (or outside [0, W) in a
     # periodic box before wrapping): clamp and wrap the cell coordinates.
@@ -75,16 +77,16 @@ def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti
     cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
     cx = ti.min(ti.max(cx, 0), ncx - 1)
     cy = ti.min(ti.max(cy, 0), ncy - 1)
-    c = cy * ncx + cx
+    c = cell_index(cx, cy, ncx, periodic)
     cell_of[i] = c
     slot[i] = ti.atomic_add(cell_count[c], 1)
 
 
 @ti.func
 def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), cell_start: ti.template(),
-                 sorted_ids: ti.template(), ncx, ncy):
+                 sorted_ids: ti.template(), ncx, ncy, periodic: ti.template()):
     """The stages after counting: cell starts, then ids scattered into their slots."""
-    prefix_sum(cell_count, cell_start, ncx * ncy)
+    prefix_sum(cell_count, cell_start, cells_in(ncx, ncy, periodic))
     for i in range(cell_of.shape[0]):
         c = cell_of[i]
         if c >= 0:
@@ -185,8 +187,9 @@ def _warp_fill_starts(count: ti.template(), start: ti.template(), ncells, nchunk
 def _build(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
            slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1),
            cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
-           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template()):
-    build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, masked)
+           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template(), periodic: ti.template()):
+    build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, masked,
+                periodic)
 
 
 class Grid:
@@ -213,7 +216,7 @@ class Grid:
         reach = max(reach, 1e-300)
         ncx = max(1, min(int(w / reach), 1 << 20))
         ncy = max(1, min(int(h / reach), 1 << 20))
-        while ncx * ncy > self.max_cells:
+        while cell_total(ncx, ncy, self.periodic) > self.max_cells:
             ncx = max(1, int(ncx / 1.5))
             ncy = max(1, int(ncy / 1.5))
         if self.periodic:
@@ -233,7 +236,7 @@ class Grid:
         """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
         mask, *rest = self.prepare(reach)
         masked = include is not None
-        _build(pos, include if masked else mask, *rest, masked)
+        _build(pos, include if masked else mask, *rest, masked, self.periodic)
 
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""
@@ -242,5 +245,5 @@ class Grid:
 
     def cells_numpy(self):
         """(cell_of, cell_start, sorted_ids) as numpy arrays, for tests."""
-        ncells = self.ncx * self.ncy
+        ncells = cell_total(self.ncx, self.ncy, self.periodic)
         return (self.cell_of.to_numpy(), self.cell_start.to_numpy()[: ncells + 1], self.sorted_ids.to_numpy())

@@ -60,7 +60,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .geometry import displacement, neighbour_range
+from .geometry import cell_index, displacement, neighbour_range
 from .grid import Grid, prefix_sum
 from .scene import DENSEST_PACKING
 
@@ -158,7 +158,7 @@ def _propose(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, seed: t
                 free = inside(x, r, box_w, box_h, periodic)
                 cx = ti.min(ti.max(ti.cast(ti.floor(x[0] / box_w * ncx), ti.i32), 0), ncx - 1)
                 cy = ti.min(ti.max(ti.cast(ti.floor(x[1] / box_h * ncy), ti.i32), 0), ncy - 1)
-                c = cy * ncx + cx
+                c = cell_index(cx, cy, ncx, periodic)
                 for row, seg in ti.ndrange(rows, segs):
                     k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
                     for m in range(k_lo, k_hi):

@@ -55,10 +55,85 @@ def test_cells_list_every_circle_once(circles_cpu):
     g = grid.Grid(n, box, periodic=False)
     g.build(pos, 1.0)
     cell_of, cell_start, sorted_ids = g.cells_numpy()
-    expected = (np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1) * g.ncx
-                + np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1))
+    cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
+    cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
+    # Walled layout: rows of ncx + 1 cells, the first of each empty, an empty row below and above.
+    expected = (cy + 1) * (g.ncx + 1) + cx + 1
+    ncells = (g.ncy + 2) * (g.ncx + 1) + 1
     assert np.array_equal(cell_of, expected)
     assert np.array_equal(np.sort(sorted_ids), np.arange(n))
-    assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=g.ncx * g.ncy))
-    for c in rng.integers(0, g.ncx * g.ncy, 200):
+    assert len(cell_start) == ncells + 1
+    assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=ncells))
+    for c in rng.integers(0, ncells, 200):
         assert (cell_of[sorted_ids[cell_start[c]:cell_start[c + 1]]] == c).all()
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+@pytest.mark.parametrize("box", [(40.0, 25.0), (2.5, 7.0), (1.0, 1.0)])
+def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
+    """The slot ranges of `neighbour_range` list exactly the circles of the 3 x 3 cells around
+    each circle's cell (each once, the block wrapped in a periodic box and cut at the walls),
+    and the forward half (`forward_range`, walls, or periodic on 3 x 3 cells and more) lists
+    each neighbouring pair exactly once."""
+    from circles.geometry import forward_fits, forward_parts, forward_range, neighbour_range, spans
+    rng = np.random.default_rng(9)
+    n = 400
+    pos = ti.Vector.ndarray(2, ti.f64, shape=n)
+    p = rng.uniform((0, 0), box, (n, 2))
+    pos.from_numpy(p)
+    g = grid.Grid(n, box, periodic=periodic)
+    g.build(pos, 1.0)
+    rows, segs = spans(g.ncx, g.ncy, periodic)
+    full = ti.ndarray(ti.i32, shape=(n, n + 1))
+    fwd = ti.ndarray(ti.i32, shape=(n, n + 1))
+
+    @ti.kernel
+    def ranges(cell_of: ti.types.ndarray(ndim=1), cell_start: ti.types.ndarray(ndim=1),
+               sorted_ids: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
+               full: ti.types.ndarray(ndim=2), fwd: ti.types.ndarray(ndim=2)):
+        for own in range(sorted_ids.shape[0]):
+            i = sorted_ids[own]
+            c = cell_of[i]
+            m = 0
+            for row, seg in ti.ndrange(rows, segs):
+                lo, hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+                for k in range(lo, hi):
+                    full[i, m] = sorted_ids[k]
+                    m += 1
+            full[i, m] = -1
+            m = 0
+            if forward_fits(ncx, ncy, periodic):
+                cx = 0
+                cy = 0
+                if ti.static(periodic):
+                    cy = c // ncx
+                    cx = c - cy * ncx
+                for q in ti.static(range(forward_parts(periodic))):
+                    lo, hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
+                    for k in range(lo, hi):
+                        fwd[i, m] = sorted_ids[k]
+                        m += 1
+            fwd[i, m] = -1
+
+    ranges(*g.args(), full, fwd)
+    full, fwd = full.to_numpy(), fwd.to_numpy()
+    ncx, ncy = g.ncx, g.ncy
+    cx = np.minimum((p[:, 0] * ncx / box[0]).astype(int), ncx - 1)
+    cy = np.minimum((p[:, 1] * ncy / box[1]).astype(int), ncy - 1)
+
+    def near(a, b, m):  # cells a and b within one cell of each other along an axis of m cells
+        d = np.abs(a - b)
+        return (d <= 1) | (periodic & (d == m - 1))
+
+    pairs = set()
+    for i in range(n):
+        listed = list(full[i, :list(full[i]).index(-1)])
+        assert len(listed) == len(set(listed))
+        expected = np.nonzero(near(cx, cx[i], ncx) & near(cy, cy[i], ncy))[0]
+        assert sorted(listed) == sorted(expected)
+        for j in fwd[i, :list(fwd[i]).index(-1)]:
+            pairs.add((min(i, j), max(i, j)) if i != j else (i, i))
+    if not periodic or (ncx >= 3 and ncy >= 3):
+        every = {(i, j) for i in range(n) for j in np.nonzero(near(cx, cx[i], ncx) & near(cy, cy[i], ncy))[0] if i < j}
+        assert pairs == every  # each pair once: a set of unordered pairs, and no (i, i)
+        assert sum(list(fwd[i]).index(-1) for i in range(n)) == len(every)
