@@ -19,7 +19,7 @@ collisions can be missed or counted twice.
 """
 import taichi as ti
 
-from .geometry import NEVER, displacement, forward_fits, forward_parts, forward_range, key_less, neighbour_range
+from .geometry import NEVER, displacement, forward_fits, forward_parts, forward_range, neighbour_range
 from .grid import enter_cell, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -84,11 +84,11 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
         # timing, which no pick depends on (keys break ties by ids); a count above the capacity
         # sends the circle back to searching its cells.
         a = ti.atomic_add(n_contacts[i], 1)
-        if a < contacts.shape[1]:
-            contacts[i, a] = j
+        if a < contacts.shape[0]:
+            contacts[a, i] = j
         b = ti.atomic_add(n_contacts[j], 1)
-        if b < contacts.shape[1]:
-            contacts[j, b] = i
+        if b < contacts.shape[0]:
+            contacts[b, j] = i
         # Approaching: the sign of the normal speed `_consider` divides by the distance. A pair
         # whose quotient rounds to -0 is listed too; listing more circles changes no pick.
         if (vel[hi] - vel[lo]).dot(d) < 0:
@@ -144,8 +144,12 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
 
 @ti.func
 def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), box,
-              best, best_lo, best_hi, best_p, periodic: ti.template()):
-    """The pick of i updated with its pair with j; returns (key, lo id, hi id, partner)."""
+              best, best_p, periodic: ti.template()):
+    """The pick of i updated with its pair with j; returns (key, partner).
+
+    Pairs order by (key, lower id, higher id) (`geometry.key_less`). For pairs of the same
+    circle i that is the order of (key, partner's id), so ids are read only on a tie of keys.
+    """
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
@@ -158,11 +162,15 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
         if vn < 0:
             # -(time since first contact at the current speeds): earliest first.
             key = -(s - dist) / (-vn)
-            klo = ti.min(ids[i], ids[j])
-            khi = ti.max(ids[i], ids[j])
-            if key_less(key, klo, khi, best, best_lo, best_hi):
-                best, best_lo, best_hi, best_p = key, klo, khi, j
-    return best, best_lo, best_hi, best_p
+            take = False
+            if key < best:
+                take = True
+            elif key == best:
+                if best_p >= 0:
+                    take = ids[j] < ids[best_p]
+            if take:
+                best, best_p = key, j
+    return best, best_p
 
 
 @ti.func
@@ -177,20 +185,16 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
     within a step. A circle with more contacts than the list holds searches its 3 x 3 cells.
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
-    n = pos.shape[0]
-    cap = contacts.shape[1]
+    cap = contacts.shape[0]
     for a in range(work[LIST0 + side]):
         box = ti.Vector([box_w, box_h], dt=real)
         i = lists[side, a]
         best = ti.cast(NEVER, real)
-        best_lo = n
-        best_hi = n
         best_p = -1
         listed = n_contacts[i]
         if listed <= cap:
             for m in range(listed):
-                best, best_lo, best_hi, best_p = _consider(i, contacts[i, m], pos, vel, radius, ids, box, best,
-                                                           best_lo, best_hi, best_p, periodic)
+                best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
         else:
             c = cell_of[i]
             for row, seg in ti.ndrange(rows, segs):
@@ -198,8 +202,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i:
-                        best, best_lo, best_hi, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_lo,
-                                                                   best_hi, best_p, periodic)
+                        best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
         partner[i] = best_p
         picked[i] = work[ROUND]
 
@@ -216,9 +219,9 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
     """
     _enlist(i, rnd, marked, lists, work, side)
     listed = n_contacts[i]
-    if listed <= contacts.shape[1]:
+    if listed <= contacts.shape[0]:
         for m in range(listed):
-            _enlist(contacts[i, m], rnd, marked, lists, work, side)
+            _enlist(contacts[m, i], rnd, marked, lists, work, side)
     else:
         c = cell_of[i]
         for row, seg in ti.ndrange(rows, segs):
@@ -244,8 +247,7 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
     changes before then), and it is not listed; its partner lists what it overlaps.
     """
     if n_contacts[x] == 1:
-        n = pos.shape[0]
-        _, _, _, p = _consider(x, y, pos, vel, radius, ids, box, ti.cast(NEVER, real), n, n, -1, periodic)
+        _, p = _consider(x, y, pos, vel, radius, ids, box, ti.cast(NEVER, real), -1, periodic)
         partner[x] = p
     else:
         _enlist_overlapping(x, rnd, pos, radius, marked, lists, work, contacts, n_contacts, cell_of, cell_start,

@@ -217,7 +217,9 @@ class Simulation:
             self._partner = ti.ndarray(ti.i32, shape=n)
             self._picked = ti.ndarray(ti.i32, shape=n)
             self._marked = ti.ndarray(ti.i32, shape=n)
-            self._contacts = ti.ndarray(ti.i32, shape=(n, DISCRETE_CONTACTS))
+            # Contact m of every circle in one row: most circles overlap at most one other, so the
+            # rounds read row 0 only.
+            self._contacts = ti.ndarray(ti.i32, shape=(DISCRETE_CONTACTS, n))
             self._n_contacts = ti.ndarray(ti.i32, shape=n)
             self._work_lists = ti.ndarray(ti.i32, shape=(2, n))
             self._work = ti.ndarray(ti.i32, shape=4)

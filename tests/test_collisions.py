@@ -191,3 +191,46 @@ def test_discrete_scheme_fast_bullet_tunnels(circles_cpu):
     assert np.array_equal(s.vel, np.array([[BULLET_SPEED, 0.0], [0.0, 0.0]]))
     assert s.pos[0, 0] == pytest.approx(4.0, abs=1e-14)
     assert s.pos[0, 0] - s.pos[1, 0] == pytest.approx(1.0, abs=1e-14)
+
+
+def _rounds_in_a_row(v, m, first):
+    """The discrete rounds for three circles in a row (left, middle, right), both outer ones
+    overlapping the middle one: the pair `first` (0: left, 1: right) is resolved first, then
+    whichever pair approaches, until none does (1D elastic impulses)."""
+    v = list(v)
+    side = first
+    for _ in range(16):
+        a, b = (0, 1) if side == 0 else (1, 2)
+        if v[a] <= v[b]:  # not approaching: is the other pair?
+            side = 1 - side
+            a, b = (0, 1) if side == 0 else (1, 2)
+            if v[a] <= v[b]:
+                break
+        va, vb = v[a], v[b]
+        v[a] = ((m[a] - m[b]) * va + 2 * m[b] * vb) / (m[a] + m[b])
+        v[b] = ((m[b] - m[a]) * vb + 2 * m[a] * va) / (m[a] + m[b])
+        side = 1 - side
+    return v
+
+
+@pytest.mark.parametrize("left_id_lower", [True, False])
+def test_discrete_exact_tie_goes_to_the_lower_id(circles_cpu, left_id_lower):
+    """Two circles hit a middle one in the same step with the same key (the same overlap, 1/8,
+    at the same approach speed, 1: exact binary fractions). The rule on ids decides which
+    pair goes first (the one whose other circle has the lower id), and with masses 1, 2 and 4
+    the order shows in the outcome: the two orders end 0.3 or more apart in velocity.
+    """
+    x = [6.875, 8.0, 9.125]
+    v = [1.0, 0.0, -1.0]
+    m = [2.0, 1.0, 4.0]
+    # Creation order (ids): the middle circle, then the outer one with the lower id.
+    order = [1, 0, 2] if left_id_lower else [1, 2, 0]
+    sim = two(circles_cpu, [[x[k], 8.0] for k in order], [[v[k], 0.0] for k in order], [m[k] for k in order],
+              scheme="discrete", dt=0.25, box=(16.0, 16.0), radius=(0.5, 0.5, 0.5))
+    sim.step(1)
+    got = sim.state().vel[np.argsort(order), 0]
+    expected = _rounds_in_a_row(v, m, 0 if left_id_lower else 1)
+    other = _rounds_in_a_row(v, m, 1 if left_id_lower else 0)
+    assert np.abs(np.subtract(expected, other)).max() > 0.3
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13)
+    assert sim.state().vel[:, 1].tolist() == [0.0, 0.0, 0.0]
