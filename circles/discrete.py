@@ -13,6 +13,13 @@ forward half of its neighbour cells for overlaps (each pair is tested once); the
 only the circles that overlap something (the active list), and the walls only the circles
 the move left reaching past a wall.
 
+Radius spread: cells as wide as the largest diameter would hold hundreds of small circles
+when a few circles are much larger. In a walled box with a few large circles (see
+simulation.LARGE_RADIUS_RATIO) the grid has two levels: cells sized for the small circles,
+which search their neighbour cells for each other, and the large circles, each of which
+searches the block of cells its reach spans for all its pairs (`wide_row`). Both levels find
+the same pairs, so the state is the same bit for bit as with one level.
+
 Known errors of the method, which the benchmark measures: a circle faster than about a
 diameter per step can pass through another (tunnelling), overlap is left behind, and
 collisions can be missed or counted twice.
@@ -25,9 +32,12 @@ from .grid import enter_cell, finish_cells
 ndarr = ti.types.ndarray(ndim=1)
 
 
-#: Slots of the `work` array: the round number, the lengths of the two work lists, and the
-#: number of circles reaching past a wall.
-ROUND, LIST0, LIST1, WALLED = 0, 1, 2, 3
+#: Slots of the `work` array: the round number, the lengths of the two work lists, the
+#: number of circles reaching past a wall, and the number of large circles (two-level grid).
+ROUND, LIST0, LIST1, WALLED, NLARGE = 0, 1, 2, 3, 4
+#: Entries of the `spread` array of a two-level grid: the largest radius of a small circle, the
+#: largest radius, and the inverse cell width and height.
+R_CUT, R_MAX, INV_CW, INV_CH = 0, 1, 2, 3
 
 
 @ti.func
@@ -70,6 +80,46 @@ def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.templa
 
 
 @ti.func
+def is_large(i, radius: ti.template(), spread: ti.template(), two_level: ti.template()):
+    """Whether circle i is one of the few large circles of a two-level grid (see `wide_row`)."""
+    large = False
+    if ti.static(two_level):
+        large = radius[i] > spread[R_CUT]
+    return large
+
+
+@ti.func
+def wide_reach(i, radius: ti.template(), spread: ti.template()):
+    """(kx, ky): the cells along x and y within which a circle of i's radius plus the largest
+    radius lies (a whole cell more than the reach, so round-off cannot cut it short)."""
+    reach = ti.cast(radius[i], ti.f64) + ti.cast(spread[R_MAX], ti.f64)
+    return (ti.cast(ti.floor(reach * ti.cast(spread[INV_CW], ti.f64)), ti.i32) + 1,
+            ti.cast(ti.floor(reach * ti.cast(spread[INV_CH], ti.f64)), ti.i32) + 1)
+
+
+@ti.func
+def wide_row(c, dy, kx, cell_start: ti.template(), ncx, ncy):
+    """Slots [lo, hi) of row dy (from -ky to ky) of the block of cells within kx cells along x
+    of cell c, in a walled box (`geometry.cell_index`), cut at the edges of the grid.
+
+    Two-level grid: the cells are as wide as the diameter of the small circles, so a small
+    circle finds every small one it overlaps in its 3 x 3 cells; each of the few large circles
+    searches the block of cells its own reach spans, and finds its pairs with every circle.
+    """
+    stride = ncx + 1
+    cy = c // stride - 1
+    cx = c - (cy + 1) * stride - 1
+    y = cy + dy
+    lo = 0
+    hi = 0
+    if 0 <= y < ncy:
+        row = (y + 1) * stride + 1
+        lo = cell_start[row + ti.max(cx - kx, 0)]
+        hi = cell_start[row + ti.min(cx + kx, ncx - 1) + 1]
+    return lo, hi
+
+
+@ti.func
 def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
                     n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                     rnd, box, periodic: ti.template()):
@@ -100,10 +150,14 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
 def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
                    n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                    cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
-                   box_w, box_h, real: ti.template(), periodic: ti.template()):
+                   box_w, box_h, spread: ti.template(), large: ti.template(), real: ti.template(),
+                   periodic: ti.template(), two_level: ti.template()):
     """Fill the contact lists and the first work list: every overlapping pair, found once, from
     the forward half of the cells of one of its circles (half the pair tests of a full 3 x 3
-    search). Contact lists start empty; this step's first round number is work[ROUND] + 1."""
+    search). Contact lists start empty; this step's first round number is work[ROUND] + 1.
+
+    Two-level grid (`wide_row`): the pairs of two small circles as above, and every pair with
+    a large circle from the large circle's block (a pair of two large ones from its lower slot)."""
     forward = forward_fits(ncx, ncy, periodic)
     work[ROUND] += 1
     work[LIST0] = 0
@@ -119,10 +173,14 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             a_hi = cell_start[c + 2]
             b_lo, b_hi = forward_range(1, c, 0, 0, own, cell_start, ncx, ncy, periodic)
             n_a = a_hi - own - 1
+            if is_large(i, radius, spread, two_level):
+                n_a = b_lo - b_hi  # no forward search: its pairs come from its block, below
             for m in range(n_a + b_hi - b_lo):
                 k = own + 1 + m if m < n_a else b_lo + m - n_a
-                _record_contact(i, sorted_ids[k], pos, vel, radius, contacts, n_contacts, marked, lists, work,
-                                rnd, box, periodic)
+                j = sorted_ids[k]
+                if not is_large(j, radius, spread, two_level):
+                    _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
+                                    periodic)
         elif forward:
             cy = c // ncx
             cx = c - cy * ncx
@@ -138,6 +196,20 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j > i:
+                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
+                                        periodic)
+    if ti.static(two_level):
+        for a in range(work[NLARGE]):
+            box = ti.Vector([box_w, box_h], dt=real)
+            rnd = work[ROUND]
+            i = large[a]
+            c = cell_of[i]
+            kx, ky = wide_reach(i, radius, spread)
+            for dy in range(-ky, ky + 1):
+                k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
+                for k in range(k_lo, k_hi):
+                    j = sorted_ids[k]
+                    if j != i and (j > i or not is_large(j, radius, spread, two_level)):
                         _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
                                         periodic)
 
@@ -177,8 +249,8 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
 def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), partner: ti.template(),
           picked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
-          sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, real: ti.template(),
-          periodic: ti.template(), side: ti.template()):
+          sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
+          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template()):
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
     The candidates are the circle's contact list (`_scan_contacts`): positions do not change
@@ -195,6 +267,15 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
         if listed <= cap:
             for m in range(listed):
                 best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
+        elif ti.static(two_level):
+            c = cell_of[i]
+            kx, ky = wide_reach(i, radius, spread)
+            for dy in range(-ky, ky + 1):
+                k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
+                for k in range(k_lo, k_hi):
+                    j = sorted_ids[k]
+                    if j != i:
+                        best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
         else:
             c = cell_of[i]
             for row, seg in ti.ndrange(rows, segs):
@@ -211,7 +292,8 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
 def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marked: ti.template(),
                         lists: ti.template(), work: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
                         cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
-                        segs, box, periodic: ti.template(), side: ti.template()):
+                        segs, box, spread: ti.template(), periodic: ti.template(), two_level: ti.template(),
+                        side: ti.template()):
     """List i and every circle overlapping it for a new pick in round `rnd`.
 
     Positions do not move between rounds, so only pairs with i can change their key when i's
@@ -222,6 +304,17 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
     if listed <= contacts.shape[0]:
         for m in range(listed):
             _enlist(contacts[m, i], rnd, marked, lists, work, side)
+    elif ti.static(two_level):
+        c = cell_of[i]
+        kx, ky = wide_reach(i, radius, spread)
+        for dy in range(-ky, ky + 1):
+            k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                d = displacement(pos[i], pos[j], box, periodic)
+                s = radius[i] + radius[j]
+                if d.dot(d) < s * s:
+                    _enlist(j, rnd, marked, lists, work, side)
     else:
         c = cell_of[i]
         for row, seg in ti.ndrange(rows, segs):
@@ -239,7 +332,8 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
                       partner: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                       contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
                       cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
-                      real: ti.template(), periodic: ti.template(), side: ti.template()):
+                      spread: ti.template(), real: ti.template(), periodic: ti.template(),
+                      two_level: ti.template(), side: ti.template()):
     """x's velocity changed in its pair with y: list what must pick again in round `rnd`.
 
     Most circles overlap only their partner. Such a circle's next pick is made here, from that
@@ -251,7 +345,7 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
         partner[x] = p
     else:
         _enlist_overlapping(x, rnd, pos, radius, marked, lists, work, contacts, n_contacts, cell_of, cell_start,
-                            sorted_ids, ncx, ncy, rows, segs, box, periodic, side)
+                            sorted_ids, ncx, ncy, rows, segs, box, spread, periodic, two_level, side)
 
 
 @ti.func
@@ -259,8 +353,8 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
-             sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, real: ti.template(),
-             periodic: ti.template(), side: ti.template()):
+             sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
+             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
     entry); this round's list is emptied after."""
@@ -287,11 +381,11 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
                 pair_count[owner] = pair_count[owner] + 1
                 virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
-                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
-                                  periodic, 1 - side)
+                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
+                                  real, periodic, two_level, 1 - side)
                 _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
-                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, real,
-                                  periodic, 1 - side)
+                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
+                                  real, periodic, two_level, 1 - side)
     # One serial statement group between rounds (each group is a task of its own).
     work[ROUND] += 1
     work[LIST0 + side] = 0
@@ -352,16 +446,17 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(), lists: ti.template(),
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-            real: ti.template(), periodic: ti.template(), rounds: ti.template()):
+            spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+            rounds: ti.template()):
     """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
     lists (`rounds` is even, so every launch starts on list 0); a round after one that
     listed nothing has an empty list, so it costs two empty loops."""
     for r in ti.static(range(rounds)):
         _pick(pos, vel, radius, ids, partner, picked, contacts, n_contacts, lists, work, cell_of, cell_start,
-              sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic, r % 2)
+              sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level, r % 2)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
-                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
-                 r % 2)
+                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
+                 periodic, two_level, r % 2)
 
 
 @ti.func
@@ -371,11 +466,12 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        pair_count: ti.template(), virial: ti.template(), wall_count: ti.template(),
                        wall_impulse: ti.template(), walled: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-                       real: ti.template(), periodic: ti.template(), rounds: ti.template()):
+                       spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+                       rounds: ti.template()):
     """`rounds` rounds, then the wall reflections if they settled (the end of both launches)."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
-            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic,
-            rounds)
+            pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
+            periodic, two_level, rounds)
     if ti.static(not periodic):
         _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
 
@@ -386,7 +482,8 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
-               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, real: ti.template(), periodic: ti.template(),
+               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr,
+               real: ti.template(), periodic: ti.template(), two_level: ti.template(),
                rounds: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
@@ -396,10 +493,10 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
           box_w, box_h, real, periodic)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
-                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, real, periodic)
+                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, real, periodic, rounds)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds)
     return work[LIST0]
 
 
@@ -408,10 +505,20 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
                 marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
                 lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                 wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
-                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
-                real: ti.template(), periodic: ti.template(), rounds: ti.template()) -> ti.i32:
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, spread: ndarr,
+                real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+                rounds: ti.template()) -> ti.i32:
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, real, periodic, rounds)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds)
     return work[LIST0]
+
+
+@ti.kernel
+def list_large(radius: ndarr, r_cut: ti.f64, large: ndarr, work: ndarr):
+    """The slots of the circles larger than r_cut (in any order), work[NLARGE] of them."""
+    work[NLARGE] = 0
+    for i in range(radius.shape[0]):
+        if ti.cast(radius[i], ti.f64) > r_cut:
+            large[ti.atomic_add(work[NLARGE], 1)] = i

@@ -39,6 +39,11 @@ MAX_BOUND_SWEEPS = 10_000
 DISCRETE_CONTACTS = 4
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
+#: Two-level grid of the discrete scheme in a walled box: circles larger than this many times
+#: the median radius are "large" when they are at most TWO_LEVEL_MAX_FRACTION of all; the cells
+#: are then sized for the others, and each large circle searches the block its reach spans.
+LARGE_RADIUS_RATIO = 4.0
+TWO_LEVEL_MAX_FRACTION = 0.05
 #: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
 INPUT_OVERLAP_TOLERANCE = 1e-9
 
@@ -222,10 +227,33 @@ class Simulation:
             self._contacts = ti.ndarray(ti.i32, shape=(DISCRETE_CONTACTS, n))
             self._n_contacts = ti.ndarray(ti.i32, shape=n)
             self._work_lists = ti.ndarray(ti.i32, shape=(2, n))
-            self._work = ti.ndarray(ti.i32, shape=4)
             self._walled = ti.ndarray(ti.i32, shape=n)
+            self._work = ti.ndarray(ti.i32, shape=5)
             for arr in (self._picked, self._marked, self._work):
                 reductions.fill_i32(arr, 0)
+            self._setup_two_level()
+
+    def _setup_two_level(self):
+        """Choose the discrete scheme's grid: one level (cells as wide as the largest diameter), or
+        two (see LARGE_RADIUS_RATIO and discrete.wide_row)."""
+        stored = self._radius.astype(self._np_real).astype(np.float64)  # radii as the kernels see them
+        r_cut = float(stored.max())
+        small = stored[stored <= LARGE_RADIUS_RATIO * float(np.median(stored))]
+        n_large = self.n - small.size
+        self._two_level = (not self.periodic) and 0 < n_large <= TWO_LEVEL_MAX_FRACTION * self.n
+        if self._two_level:
+            r_cut = float(small.max())
+        self._r_cut = r_cut
+        self._large = ti.ndarray(ti.i32, shape=max(1, n_large))
+        ncx, ncy = self.grid.shape_for(2.0 * r_cut)
+        self._spread = ti.ndarray(self._real, shape=4)
+        self._spread.from_numpy(np.array([r_cut, stored.max(), ncx / self.box[0], ncy / self.box[1]],
+                                         dtype=self._np_real))
+        self._list_large()
+
+    def _list_large(self):
+        if self.scheme == "discrete" and self._two_level:
+            discrete.list_large(self.radius, self._r_cut, self._large, self._work)
 
     def _alloc_event_arrays(self):
         n, real = self.n, self._real
@@ -308,6 +336,7 @@ class Simulation:
         reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
                                  self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch)
         self._ids_cache = self._color_cache = None
+        self._list_large()
 
     # ---------------------------------------------------------------- stepping
     def advance(self, duration: float):
@@ -428,17 +457,19 @@ class Simulation:
     def _discrete_step(self, h):
         w, hgt = self.box
         real, periodic = self._real, self.periodic
-        _, *cells = self.grid.prepare(2.0 * self._rmax)
+        _, *cells = self.grid.prepare(2.0 * self._r_cut)
         rows, segs = spans(self.grid.ncx, self.grid.ncy, periodic)
         arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._picked,
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
-        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, real, periodic, DISCRETE_FUSED_ROUNDS)
+        two = self._two_level
+        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, real, periodic, two,
+                                   DISCRETE_FUSED_ROUNDS)
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
             more = min(DISCRETE_FUSED_ROUNDS, DISCRETE_MAX_ROUNDS - done)
-            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, real, periodic, more)
+            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._spread, real, periodic, two, more)
             done += more
         self.rounds += done
         if busy and not periodic:

@@ -5,6 +5,8 @@ kernel of its own with the sizes patched in: tiny sizes reach several groups and
 last chunks and groups with a few hundred cells.
 """
 
+import math
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -137,3 +139,46 @@ def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
         every = {(i, j) for i in range(n) for j in np.nonzero(near(cx, cx[i], ncx) & near(cy, cy[i], ncy))[0] if i < j}
         assert pairs == every  # each pair once: a set of unordered pairs, and no (i, i)
         assert sum(list(fwd[i]).index(-1) for i in range(n)) == len(every)
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_discrete_two_level_grid_matches_one_level(circles_cpu, monkeypatch, precision):
+    """A walled box with 2% of the circles 10 times larger: the discrete scheme sizes its cells
+    for the small circles and lets each large one search the block its reach spans
+    (discrete.wide_row). It must find exactly the pairs of the one-level grid (cells as wide as
+    the largest diameter), so the states agree bit for bit, through every path: small-small,
+    small-large and large-large pairs, and circles with more contacts than their list holds
+    (which search their cells again)."""
+    import circles
+    from circles import placement, simulation
+
+    rng = np.random.default_rng(3)
+    n = 1000
+    radius = np.full(n, 0.05)
+    radius[:20] = 0.5
+    area = float(np.sum(np.pi * radius ** 2)) / 0.5
+    box = (math.sqrt(area * 1.5), math.sqrt(area / 1.5))
+    pos = placement.random_sequential(radius, box, False, 5, single=precision == "f32")
+    angle = rng.uniform(0, 2 * np.pi, n)
+    vel = rng.uniform(0.5, 3.0, (n, 1)) * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+
+    def run(max_fraction):
+        monkeypatch.setattr(simulation, "TWO_LEVEL_MAX_FRACTION", max_fraction)
+        sim = circles.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme="discrete",
+                                             precision=precision, dt=0.02)
+        most = 0
+        for _ in range(20):  # 20 steps: the arrays are reordered on the way (REORDER_EVERY)
+            sim.step(1)
+            most = max(most, int(sim._n_contacts.to_numpy().max()))
+        return sim, most
+
+    two, most = run(0.05)
+    one, _ = run(0.0)
+    assert two._two_level and not one._two_level
+    assert two.grid.ncx > 3 * one.grid.ncx  # the cells are sized for the small circles
+    assert most > simulation.DISCRETE_CONTACTS  # some circle outgrew its contact list
+    a, b = two.state(), one.state()
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+    sa, sb = two.stats(), one.stats()
+    assert sa["pair_collisions"] == sb["pair_collisions"] > 500
+    assert sa["wall_collisions"] == sb["wall_collisions"]
