@@ -120,6 +120,33 @@ def wide_row(c, dy, kx, cell_start: ti.template(), ncx, ncy):
 
 
 @ti.func
+def _search_runs(i, radius: ti.template(), spread: ti.template(), rows, segs, two_level: ti.template()):
+    """(kx, ky, runs): the runs of slots that hold every circle i can overlap, for a circle that
+    searches its cells (its contact list overflowed): the rows of its block on a two-level
+    grid (`wide_row`), else the runs of its 3 x 3 cells (`geometry.neighbour_range`)."""
+    kx = 1
+    ky = 1
+    runs = rows * segs
+    if ti.static(two_level):
+        kx, ky = wide_reach(i, radius, spread)
+        runs = 2 * ky + 1
+    return kx, ky, runs
+
+
+@ti.func
+def _search_run(c, r, kx, ky, cell_start: ti.template(), ncx, ncy, segs, periodic: ti.template(),
+                two_level: ti.template()):
+    """Slots [lo, hi) of run r of `_search_runs` around cell c."""
+    lo = 0
+    hi = 0
+    if ti.static(two_level):
+        lo, hi = wide_row(c, r - ky, kx, cell_start, ncx, ncy)
+    else:
+        lo, hi = neighbour_range(c, r // segs, r % segs, cell_start, ncx, ncy, periodic)
+    return lo, hi
+
+
+@ti.func
 def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
                     n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                     rnd, box, periodic: ti.template()):
@@ -254,7 +281,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
     The candidates are the circle's contact list (`_scan_contacts`): positions do not change
-    within a step. A circle with more contacts than the list holds searches its 3 x 3 cells.
+    within a step. A circle with more contacts than the list holds searches its cells (`_search_runs`).
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
     cap = contacts.shape[0]
@@ -267,19 +294,11 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
         if listed <= cap:
             for m in range(listed):
                 best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
-        elif ti.static(two_level):
-            c = cell_of[i]
-            kx, ky = wide_reach(i, radius, spread)
-            for dy in range(-ky, ky + 1):
-                k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j != i:
-                        best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
         else:
             c = cell_of[i]
-            for row, seg in ti.ndrange(rows, segs):
-                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            kx, ky, runs = _search_runs(i, radius, spread, rows, segs, two_level)
+            for r in range(runs):
+                k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i:
@@ -304,21 +323,11 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
     if listed <= contacts.shape[0]:
         for m in range(listed):
             _enlist(contacts[m, i], rnd, marked, lists, work, side)
-    elif ti.static(two_level):
-        c = cell_of[i]
-        kx, ky = wide_reach(i, radius, spread)
-        for dy in range(-ky, ky + 1):
-            k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
-            for k in range(k_lo, k_hi):
-                j = sorted_ids[k]
-                d = displacement(pos[i], pos[j], box, periodic)
-                s = radius[i] + radius[j]
-                if d.dot(d) < s * s:
-                    _enlist(j, rnd, marked, lists, work, side)
     else:
         c = cell_of[i]
-        for row, seg in ti.ndrange(rows, segs):
-            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+        kx, ky, runs = _search_runs(i, radius, spread, rows, segs, two_level)
+        for r in range(runs):
+            k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 d = displacement(pos[i], pos[j], box, periodic)
