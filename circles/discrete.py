@@ -273,8 +273,9 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
 
 
 @ti.func
-def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), partner: ti.template(),
-          picked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(), ids: ti.template(),
+          partner: ti.template(), picked: ti.template(), pair_count: ti.template(), virial: ti.template(),
+          contacts: ti.template(), n_contacts: ti.template(),
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
           sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
           real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template()):
@@ -291,7 +292,21 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti
         best = ti.cast(NEVER, real)
         best_p = -1
         listed = n_contacts[i]
-        if listed <= cap:
+        first = -1
+        if listed == 1:
+            first = contacts[0, i]
+            if n_contacts[first] != 1:
+                first = -1
+        if first >= 0:
+            # An isolated pair (each circle overlaps only the other; most pairs are): the two
+            # picks are each other exactly when they approach, so the lower slot resolves the
+            # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
+            # (no other circle overlaps them, so none reads their picks this step).
+            if i < first:
+                _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic)
+                if p == first:
+                    _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic)
+        elif listed <= cap:
             for m in range(listed):
                 best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
         else:
@@ -358,6 +373,29 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
 
 
 @ti.func
+def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+             ids: ti.template(), pair_count: ti.template(), virial: ti.template(), box, periodic: ti.template()):
+    """The elastic impulse of the pair (i, j), i its lower slot, when it approaches; returns
+    whether it did. Plain updates, not atomics: a circle is in at most one executed pair per
+    round."""
+    d = displacement(pos[i], pos[j], box, periodic)
+    nrm = d.normalized()
+    vn = (vel[j] - vel[i]).dot(nrm)
+    hit = vn < 0
+    if hit:
+        wi = inv_mass[i]
+        wj = inv_mass[j]
+        jmp = 2.0 * vn / (wi + wj)
+        # Same expression for both circles: rounding does not depend on which one is i.
+        vel[i] = vel[i] + (wi * jmp) * nrm
+        vel[j] = vel[j] + (wj * jmp) * (-nrm)
+        owner = i if ids[i] < ids[j] else j
+        pair_count[owner] = pair_count[owner] + 1
+        virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+    return hit
+
+
+@ti.func
 def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
              ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
@@ -375,20 +413,7 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
         # A mutual pair is resolved by its lower index when both picked this round, else by the
         # one that did (the other's pick is older and still holds).
         if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
-            d = displacement(pos[i], pos[j], box, periodic)
-            nrm = d.normalized()
-            vn = (vel[j] - vel[i]).dot(nrm)
-            if vn < 0:
-                wi = inv_mass[i]
-                wj = inv_mass[j]
-                jmp = 2.0 * vn / (wi + wj)
-                # Same expression for both circles: rounding does not depend on which one is i.
-                vel[i] = vel[i] + (wi * jmp) * nrm
-                vel[j] = vel[j] + (wj * jmp) * (-nrm)
-                # Plain updates, not atomics: a circle is in at most one executed pair per round.
-                owner = i if ids[i] < ids[j] else j
-                pair_count[owner] = pair_count[owner] + 1
-                virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+            if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic):
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
                                   real, periodic, two_level, 1 - side)
@@ -461,7 +486,8 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
     lists (`rounds` is even, so every launch starts on list 0); a round after one that
     listed nothing has an empty list, so it costs two empty loops."""
     for r in ti.static(range(rounds)):
-        _pick(pos, vel, radius, ids, partner, picked, contacts, n_contacts, lists, work, cell_of, cell_start,
+        _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
+              cell_of, cell_start,
               sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level, r % 2)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
                  lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
