@@ -35,9 +35,9 @@ ndarr = ti.types.ndarray(ndim=1)
 #: Slots of the `work` array: the round number, the lengths of the two work lists, the
 #: number of circles reaching past a wall, and the number of large circles (two-level grid).
 ROUND, LIST0, LIST1, WALLED, NLARGE = 0, 1, 2, 3, 4
-#: Entries of the `spread` array of a two-level grid: the largest radius of a small circle, the
-#: largest radius, and the inverse cell width and height.
-R_CUT, R_MAX, INV_CW, INV_CH = 0, 1, 2, 3
+#: Entries of the `spread` array of a two-level grid: the largest radius of a small circle and
+#: the largest radius.
+R_CUT, R_MAX = 0, 1
 
 
 @ti.func
@@ -89,12 +89,12 @@ def is_large(i, radius: ti.template(), spread: ti.template(), two_level: ti.temp
 
 
 @ti.func
-def wide_reach(i, radius: ti.template(), spread: ti.template()):
+def wide_reach(i, radius: ti.template(), spread: ti.template(), box, ncx, ncy):
     """(kx, ky): the cells along x and y within which a circle of i's radius plus the largest
     radius lies (a whole cell more than the reach, so round-off cannot cut it short)."""
     reach = ti.cast(radius[i], ti.f64) + ti.cast(spread[R_MAX], ti.f64)
-    return (ti.cast(ti.floor(reach * ti.cast(spread[INV_CW], ti.f64)), ti.i32) + 1,
-            ti.cast(ti.floor(reach * ti.cast(spread[INV_CH], ti.f64)), ti.i32) + 1)
+    return (ti.cast(ti.floor(reach * ncx / ti.cast(box[0], ti.f64)), ti.i32) + 1,
+            ti.cast(ti.floor(reach * ncy / ti.cast(box[1], ti.f64)), ti.i32) + 1)
 
 
 @ti.func
@@ -120,15 +120,17 @@ def wide_row(c, dy, kx, cell_start: ti.template(), ncx, ncy):
 
 
 @ti.func
-def _search_runs(i, radius: ti.template(), spread: ti.template(), rows, segs, two_level: ti.template()):
+def _search_runs(i, radius: ti.template(), spread: ti.template(), box, ncx, ncy, rows, segs,
+                 two_level: ti.template()):
     """(kx, ky, runs): the runs of slots that hold every circle i can overlap, for a circle that
-    searches its cells (its contact list overflowed): the rows of its block on a two-level
-    grid (`wide_row`), else the runs of its 3 x 3 cells (`geometry.neighbour_range`)."""
+    searches its cells (its contact list overflowed, or it is a large circle): the rows of its
+    block on a two-level grid (`wide_row`), else the runs of its 3 x 3 cells
+    (`geometry.neighbour_range`)."""
     kx = 1
     ky = 1
     runs = rows * segs
     if ti.static(two_level):
-        kx, ky = wide_reach(i, radius, spread)
+        kx, ky = wide_reach(i, radius, spread, box, ncx, ncy)
         runs = 2 * ky + 1
     return kx, ky, runs
 
@@ -200,9 +202,10 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             a_hi = cell_start[c + 2]
             b_lo, b_hi = forward_range(1, c, 0, 0, own, cell_start, ncx, ncy, periodic)
             n_a = a_hi - own - 1
+            count = n_a + b_hi - b_lo
             if is_large(i, radius, spread, two_level):
-                n_a = b_lo - b_hi  # no forward search: its pairs come from its block, below
-            for m in range(n_a + b_hi - b_lo):
+                count = 0  # no forward search: its pairs come from its block, below
+            for m in range(count):
                 k = own + 1 + m if m < n_a else b_lo + m - n_a
                 j = sorted_ids[k]
                 if not is_large(j, radius, spread, two_level):
@@ -231,9 +234,9 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             rnd = work[ROUND]
             i = large[a]
             c = cell_of[i]
-            kx, ky = wide_reach(i, radius, spread)
-            for dy in range(-ky, ky + 1):
-                k_lo, k_hi = wide_row(c, dy, kx, cell_start, ncx, ncy)
+            kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
+            for r in range(runs):
+                k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i and (j > i or not is_large(j, radius, spread, two_level)):
@@ -311,7 +314,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
                 best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
         else:
             c = cell_of[i]
-            kx, ky, runs = _search_runs(i, radius, spread, rows, segs, two_level)
+            kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
             for r in range(runs):
                 k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
                 for k in range(k_lo, k_hi):
@@ -340,7 +343,7 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
             _enlist(contacts[m, i], rnd, marked, lists, work, side)
     else:
         c = cell_of[i]
-        kx, ky, runs = _search_runs(i, radius, spread, rows, segs, two_level)
+        kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
         for r in range(runs):
             k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
             for k in range(k_lo, k_hi):

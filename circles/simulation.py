@@ -244,11 +244,9 @@ class Simulation:
         if self._two_level:
             r_cut = float(small.max())
         self._r_cut = r_cut
-        self._large = ti.ndarray(ti.i32, shape=max(1, n_large))
-        ncx, ncy = self.grid.shape_for(2.0 * r_cut)
-        self._spread = ti.ndarray(self._real, shape=4)
-        self._spread.from_numpy(np.array([r_cut, stored.max(), ncx / self.box[0], ncy / self.box[1]],
-                                         dtype=self._np_real))
+        self._large = ti.ndarray(ti.i32, shape=n_large if self._two_level else 1)
+        self._spread = ti.ndarray(self._real, shape=2)
+        self._spread.from_numpy(np.array([r_cut, stored.max()], dtype=self._np_real))
         self._list_large()
 
     def _list_large(self):
