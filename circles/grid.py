@@ -219,9 +219,6 @@ class Grid:
         while cell_total(ncx, ncy, self.periodic) > self.max_cells:
             ncx = max(1, int(ncx / 1.5))
             ncy = max(1, int(ncy / 1.5))
-        if self.periodic:
-            # Every cell must be at least `reach` wide also after wrapping: equal cells only.
-            pass
         return ncx, ncy
 
     def prepare(self, reach):
