@@ -1,6 +1,7 @@
 """Side-by-side speed of this tree's engine against an earlier commit, in one run.
 
     python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
+                           [--arch cpu|gpu] [--steps K]
 
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
@@ -35,7 +36,7 @@ import circles
 n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 sys.path.insert(0, sys.argv[4])
 from kernel_profile import bench_scene, time_steps
-circles.init(arch="cpu")
+circles.init(arch=sys.argv[5])
 sim = circles.Simulation(bench_scene(n, scheme, seed=1))
 sim.step(16)  # compiles every kernel of a step, the reorder of every 16th step included
 times, pairs, energy_change, _ = time_steps(sim, steps)
@@ -54,35 +55,42 @@ def export(ref, into):
     tar_path.unlink()
 
 
-def run(tree, n, scheme, steps):
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench")],
+def run(tree, n, scheme, steps, arch):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench"), arch],
                          capture_output=True, text=True, env=env, cwd=str(tree), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--base", required=True, help="the earlier commit (any git revision)")
+    parser.add_argument("--base", required=True,
+                        help="the earlier commit (any git revision), or a folder holding its exported tree")
     parser.add_argument("--n", type=int, nargs="+", default=[100_000, 1_000_000])
     parser.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=["discrete", "event"])
     parser.add_argument("--rounds", type=int, default=3, help="processes per engine and row, alternating")
+    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
+    parser.add_argument("--steps", type=int, default=0,
+                        help="timed steps per process (default: 2e7 / N discrete, 2e6 / N event, 3 to 20)")
     args = parser.parse_args()
-    print(f"base {args.base} against this tree ({engine_revision()}); area fraction 0.3, walls, f32, "
-          "default dt\n")
+    print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}; area fraction 0.3, "
+          "walls, f32, default dt\n")
     print("| N | scheme | base circle-steps/s | this circle-steps/s | ratio | base pairs, energy change "
           "| this pairs, energy change |")
     print("|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        export(args.base, tmp)
+        if os.path.isdir(os.path.join(args.base, "circles")):
+            tmp = args.base
+        else:
+            export(args.base, tmp)
         for n in args.n:
             for scheme in args.scheme:
-                steps = max(3, min(20, int(2e6 // n) if scheme == "event" else int(2e7 // n)))
+                steps = args.steps or max(3, min(20, int(2e6 // n) if scheme == "event" else int(2e7 // n)))
                 speeds = {"base": [], "this": []}
                 last = {}
                 for _ in range(args.rounds):
                     for name, tree in (("base", tmp), ("this", ROOT)):
-                        result = run(tree, n, scheme, steps)
+                        result = run(tree, n, scheme, steps, args.arch)
                         speeds[name] += [n / t for t in result["times"]]
                         last[name] = result
                 med = {k: float(np.median(v)) for k, v in speeds.items()}

@@ -9,8 +9,9 @@ smallest key overall is always mutual, so each round resolves at least one pair.
 first round only circles overlapping a resolved circle pick again; the others' picks still hold.
 
 What a step touches: every circle once to move and once to sort into the grid and search the
-forward half of its neighbour cells for overlaps (each pair is tested once); the rounds visit
-only the circles that overlap something (the active list), and the walls only the circles
+forward half of its neighbour cells for overlaps (each pair is tested once); the first round
+reads a mark of every circle and works on those with an approaching overlap, later rounds
+visit only the circles listed as overlapping a resolved one, and the walls only the circles
 the move left reaching past a wall.
 
 Radius spread: cells as wide as the largest diameter would hold hundreds of small circles
@@ -77,6 +78,25 @@ def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.templa
     if marked[k] < rnd:
         if ti.atomic_max(marked[k], rnd) < rnd:
             lists[side, ti.atomic_add(work[LIST0 + side], 1)] = k
+
+
+@ti.func
+def _listed(a, rnd, flag: ti.template(), lists: ti.template(), side: ti.template(), every: ti.template()):
+    """(circle, whether it takes part) for item a of a round's loop: the a-th entry of the
+    round's work list, or with `every` circle a itself when flag[a] is the round's number
+    (`marked` in the pick pass, `picked` in the resolve pass, which changes `marked`).
+
+    A step's first round loops over every circle: it reads them in memory order, and the scan
+    that marks them builds no list, whose one counter every listing thread would add to (on a
+    GPU those adds to one address cost more than the loop; on a CPU the loop is no slower).
+    Later rounds list the few circles whose picks a resolution changed."""
+    i = a
+    take = True
+    if ti.static(every):
+        take = flag[a] == rnd
+    else:
+        i = lists[side, a]
+    return i, take
 
 
 @ti.func
@@ -153,7 +173,7 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
                     n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                     rnd, box, periodic: ti.template()):
     """Add j to i's contact list and i to j's when the two overlap (the test `_consider` makes);
-    when they also approach, both go on the first round's work list."""
+    when they also approach, both are marked for the first round (`_listed`)."""
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
@@ -171,8 +191,9 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
         # Approaching: the sign of the normal speed `_consider` divides by the distance. A pair
         # whose quotient rounds to -0 is listed too; listing more circles changes no pick.
         if (vel[hi] - vel[lo]).dot(d) < 0:
-            _enlist(i, rnd, marked, lists, work, 0)
-            _enlist(j, rnd, marked, lists, work, 0)
+            # Every thread that marks a circle here writes the same number: plain stores.
+            marked[i] = rnd
+            marked[j] = rnd
 
 
 @ti.func
@@ -181,9 +202,10 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                    cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
                    box_w, box_h, spread: ti.template(), large: ti.template(), real: ti.template(),
                    periodic: ti.template(), two_level: ti.template()):
-    """Fill the contact lists and the first work list: every overlapping pair, found once, from
-    the forward half of the cells of one of its circles (half the pair tests of a full 3 x 3
-    search). Contact lists start empty; this step's first round number is work[ROUND] + 1.
+    """Fill the contact lists and mark the circles of the first round (`_listed`): every
+    overlapping pair, found once, from the forward half of the cells of one of its circles
+    (half the pair tests of a full 3 x 3 search). Contact lists start empty; this step's first
+    round number is work[ROUND] + 1.
 
     Two-level grid (`wide_row`): the pairs of two small circles as above, and every pair with
     a large circle from the large circle's block (a pair of two large ones from its lower slot)."""
@@ -281,7 +303,8 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
           contacts: ti.template(), n_contacts: ti.template(),
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
           sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template()):
+          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
+          marked: ti.template(), every: ti.template()):
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
     The candidates are the circle's contact list (`_scan_contacts`): positions do not change
@@ -289,40 +312,44 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
     cap = contacts.shape[0]
-    for a in range(work[LIST0 + side]):
+    items = work[LIST0 + side]
+    if ti.static(every):
+        items = pos.shape[0]
+    for a in range(items):
         box = ti.Vector([box_w, box_h], dt=real)
-        i = lists[side, a]
-        best = ti.cast(NEVER, real)
-        best_p = -1
-        listed = n_contacts[i]
-        first = -1
-        if listed == 1:
-            first = contacts[0, i]
-            if n_contacts[first] != 1:
-                first = -1
-        if first >= 0:
-            # An isolated pair (each circle overlaps only the other; most pairs are): the two
-            # picks are each other exactly when they approach, so the lower slot resolves the
-            # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
-            # (no other circle overlaps them, so none reads their picks this step).
-            if i < first:
-                _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic)
-                if p == first:
-                    _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic)
-        elif listed <= cap:
-            for m in range(listed):
-                best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
-        else:
-            c = cell_of[i]
-            kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
-            for r in range(runs):
-                k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j != i:
-                        best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
-        partner[i] = best_p
-        picked[i] = work[ROUND]
+        i, take = _listed(a, work[ROUND], marked, lists, side, every)
+        if take:
+            best = ti.cast(NEVER, real)
+            best_p = -1
+            listed = n_contacts[i]
+            first = -1
+            if listed == 1:
+                first = contacts[0, i]
+                if n_contacts[first] != 1:
+                    first = -1
+            if first >= 0:
+                # An isolated pair (each circle overlaps only the other; most pairs are): the two
+                # picks are each other exactly when they approach, so the lower slot resolves the
+                # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
+                # (no other circle overlaps them, so none reads their picks this step).
+                if i < first:
+                    _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic)
+                    if p == first:
+                        _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic)
+            elif listed <= cap:
+                for m in range(listed):
+                    best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
+            else:
+                c = cell_of[i]
+                kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
+                for r in range(runs):
+                    k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
+                    for k in range(k_lo, k_hi):
+                        j = sorted_ids[k]
+                        if j != i:
+                            best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
+            partner[i] = best_p
+            picked[i] = work[ROUND]
 
 
 @ti.func
@@ -404,18 +431,22 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
              sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template()):
+             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
+             every: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
     entry); this round's list is emptied after."""
-    for a in range(work[LIST0 + side]):
+    items = work[LIST0 + side]
+    if ti.static(every):
+        items = pos.shape[0]
+    for a in range(items):
         box = ti.Vector([box_w, box_h], dt=real)
         rnd = work[ROUND]
-        i = lists[side, a]
+        i, take = _listed(a, rnd, picked, lists, side, every)
         j = partner[i]
         # A mutual pair is resolved by its lower index when both picked this round, else by the
         # one that did (the other's pick is older and still holds).
-        if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
+        if take and j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
             if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic):
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
@@ -484,17 +515,19 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
             spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-            rounds: ti.template()):
+            rounds: ti.template(), first_every: ti.template()):
     """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
     lists (`rounds` is even, so every launch starts on list 0); a round after one that
-    listed nothing has an empty list, so it costs two empty loops."""
+    listed nothing has an empty list, so it costs two empty loops. With `first_every` the
+    first round loops over every circle instead of its list (`_listed`)."""
     for r in ti.static(range(rounds)):
+        every = ti.static(first_every and r == 0)
         _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
-              cell_of, cell_start,
-              sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level, r % 2)
+              cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level,
+              r % 2, marked, every)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
                  lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-                 periodic, two_level, r % 2)
+                 periodic, two_level, r % 2, every)
 
 
 @ti.func
@@ -505,11 +538,11 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        wall_impulse: ti.template(), walled: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
                        spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                       rounds: ti.template()):
+                       rounds: ti.template(), first_every: ti.template()):
     """`rounds` rounds, then the wall reflections if they settled (the end of both launches)."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
             pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-            periodic, two_level, rounds)
+            periodic, two_level, rounds, first_every)
     if ti.static(not periodic):
         _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
 
@@ -534,7 +567,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, True)
     return work[LIST0]
 
 
@@ -549,7 +582,7 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, False)
     return work[LIST0]
 
 

@@ -108,25 +108,31 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells):
     """
     chunk, group = ti.static(_scan_shape())
     nchunks = (ncells + chunk - 1) // chunk
-    for b in range(nchunks):
-        lo = b * chunk
-        hi = ti.min(lo + chunk, ncells)
-        total = 0
-        for c in range(lo, hi):
-            total += count[c]
-        start[hi] = total
+    if ti.static(_warp_fill()):
+        _warp_chunk_totals(count, start, ncells, nchunks, chunk)
+    else:
+        for b in range(nchunks):
+            lo = b * chunk
+            hi = ti.min(lo + chunk, ncells)
+            total = 0
+            for c in range(lo, hi):
+                total += count[c]
+            start[hi] = total
     if ti.static(group == 0):
         ti.loop_config(serialize=True)
         for b in range(1, nchunks):
             start[ti.min((b + 1) * chunk, ncells)] += start[b * chunk]
     else:
         ngroups = (nchunks + group - 1) // group
-        for g in range(ngroups):
-            running = 0
-            for b in range(g * group, ti.min((g + 1) * group, nchunks)):
-                hi = ti.min((b + 1) * chunk, ncells)
-                running += start[hi]
-                start[hi] = running
+        if ti.static(_warp_fill()):
+            _warp_group_totals(start, ncells, nchunks, ngroups, chunk, group)
+        else:
+            for g in range(ngroups):
+                running = 0
+                for b in range(g * group, ti.min((g + 1) * group, nchunks)):
+                    hi = ti.min((b + 1) * chunk, ncells)
+                    running += start[hi]
+                    start[hi] = running
         ti.loop_config(serialize=True)
         for g in range(1, ngroups):
             start[ti.min((g + 1) * group * chunk, ncells)] += start[g * group * chunk]
@@ -147,6 +153,59 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells):
                 start[c + 1] = running
                 count[c] = 0
             count[hi - 1] = 0
+
+
+@ti.func
+def _warp_inclusive(x, lane):
+    """The sum of x over lanes 0..lane of the warp (a scan by register shuffles; every lane
+    of the warp must take part)."""
+    for d in ti.static((1, 2, 4, 8, 16)):
+        y = ti.simt.warp.shfl_up_i32(ti.u32(0xFFFFFFFF), x, d)
+        if lane >= d:
+            x += y
+    return x
+
+
+@ti.func
+def _warp_chunk_totals(count: ti.template(), start: ti.template(), ncells, nchunks, chunk: ti.template()):
+    """Pass 1 of `prefix_sum` on CUDA: one warp per chunk, reading 32 neighbouring cells at a
+    time (one thread per chunk would read 32 cells a chunk apart at each load)."""
+    ti.loop_config(block_dim=128)
+    for t in range(nchunks * WARP):
+        b = t // WARP
+        lane = t % WARP
+        lo = b * chunk
+        hi = ti.min(lo + chunk, ncells)
+        x = 0
+        for s in range((chunk + WARP - 1) // WARP):
+            c = lo + s * WARP + lane
+            if c < hi:
+                x += count[c]
+        x = _warp_inclusive(x, lane)
+        if lane == WARP - 1:
+            start[hi] = x
+
+
+@ti.func
+def _warp_group_totals(start: ti.template(), ncells, nchunks, ngroups, chunk: ti.template(), group: ti.template()):
+    """Pass 2 of `prefix_sum` on CUDA: one warp per group of chunks, 32 chunk ends at a time,
+    so that a group's running totals take group / 32 dependent steps, not group."""
+    ti.loop_config(block_dim=128)
+    for t in range(ngroups * WARP):
+        g = t // WARP
+        lane = t % WARP
+        b_hi = ti.min((g + 1) * group, nchunks)
+        carry = 0
+        for s in range((group + WARP - 1) // WARP):
+            b = g * group + s * WARP + lane
+            end = ti.min((b + 1) * chunk, ncells)
+            x = 0
+            if b < b_hi:
+                x = start[end]
+            x = _warp_inclusive(x, lane)
+            if b < b_hi:
+                start[end] = carry + x
+            carry += ti.simt.warp.shfl_sync_i32(ti.u32(0xFFFFFFFF), x, WARP - 1)
 
 
 @ti.func
@@ -172,10 +231,7 @@ def _warp_fill_starts(count: ti.template(), start: ti.template(), ncells, nchunk
             x = 0
             if c < hi:
                 x = count[c]
-            for d in ti.static((1, 2, 4, 8, 16)):
-                y = ti.simt.warp.shfl_up_i32(full, x, d)
-                if lane >= d:
-                    x += y
+            x = _warp_inclusive(x, lane)
             if c < hi - 1:
                 start[c + 1] = carry + x
             if c < hi:

@@ -1,33 +1,68 @@
 """Whole-array kernels: largest speed with a finiteness check, largest overlap, copies."""
 import taichi as ti
 
+from .backend import current_arch
 from .geometry import displacement, neighbour_range
 
 ndarr = ti.types.ndarray(ndim=1)
 
 
-@ti.kernel
-def max_speed(pos: ndarr, vel: ndarr, out: ndarr) -> ti.f64:
+#: Threads of `max_speed` on a GPU: each takes every STRIDED_THREADS-th circle, so that a
+#: warp reads neighbouring circles, and offers one maximum to the contended atomic.
+STRIDED_THREADS = 1 << 16
+
+
+@ti.func
+def _speed(pos: ti.template(), vel: ti.template(), i):
+    """(|v_i| in float64, 1.0 when circle i's position or velocity is not finite else 0.0)."""
+    p = ti.cast(pos[i], ti.f64)
+    v = ti.cast(vel[i], ti.f64)
+    bad = 0.0
+    for a in ti.static(range(2)):
+        # x - x is 0 for finite x and NaN for NaN or +-Inf.
+        if not (p[a] - p[a] == 0.0) or not (v[a] - v[a] == 0.0):
+            bad = 1.0
+    return v.norm(), bad
+
+
+def max_speed(pos, vel, out) -> float:
     """Largest |v|, or minus the number of circles with a non-finite position or velocity.
 
-    One value, returned by the kernel: a separate read-back would cost a second launch.
+    `out`: a float64 ndarray of 2 elements. One launch, whose kernel returns the value (a
+    separate read-back would cost a second launch).
     """
+    return _max_speed(pos, vel, out, STRIDED_THREADS if current_arch() == "gpu" else 0)
+
+
+@ti.kernel
+def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti.f64:
+    """`max_speed` as one loop over the circles (threads = 0), or as `threads` threads that
+    each take every threads-th circle."""
     out[0] = 0.0
     out[1] = 0.0
-    for i in range(pos.shape[0]):
-        p = ti.cast(pos[i], ti.f64)
-        v = ti.cast(vel[i], ti.f64)
-        s = v.norm()
-        bad = False
-        for a in ti.static(range(2)):
-            # x - x is 0 for finite x and NaN for NaN or +-Inf.
-            if not (p[a] - p[a] == 0.0) or not (v[a] - v[a] == 0.0):
-                bad = True
-        if bad:
-            ti.atomic_add(out[1], 1.0)
-        elif s > out[0]:
-            # Reading first leaves only the few new maxima to the (contended) atomic.
-            ti.atomic_max(out[0], s)
+    n = pos.shape[0]
+    if ti.static(threads > 0):
+        for t in range(ti.min(n, threads)):
+            top = 0.0
+            bad = 0.0
+            i = t
+            while i < n:
+                s, b = _speed(pos, vel, i)
+                top = ti.max(top, s)
+                bad += b
+                i += threads
+            if bad > 0:
+                ti.atomic_add(out[1], bad)
+            if top > out[0]:
+                ti.atomic_max(out[0], top)
+    else:
+        for i in range(n):
+            s, bad = _speed(pos, vel, i)
+            if bad > 0:
+                ti.atomic_add(out[1], 1.0)
+            elif s > out[0]:
+                # Reading first leaves only the few new maxima to the (contended) atomic.
+                ti.atomic_max(out[0], s)
     result = out[0]
     if out[1] > 0:
         result = -out[1]

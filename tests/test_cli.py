@@ -129,9 +129,10 @@ def test_unwritable_output_is_refused_before_simulating(tmp_path, capsys, monkey
     monkeypatch.setattr(circles, "Simulation", no_simulation)
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    assert cli.main(["run", "--out", str(blocker / "run.mp4")]) == 2
+    # A GIF: the check must not depend on imageio-ffmpeg being installed (MP4 needs it).
+    assert cli.main(["run", "--out", str(blocker / "run.gif")]) == 2
     error = capsys.readouterr().err.strip()
-    assert len(error.splitlines()) == 1 and "cannot write" in error and "run.mp4" in error
+    assert len(error.splitlines()) == 1 and "cannot write" in error and "run.gif" in error
 
 
 def test_help_exits_0(capsys):

@@ -38,7 +38,7 @@ def scan_with(chunk, group):
 
 
 @pytest.mark.parametrize("chunk,group", [(3, 2), (5, 4), (1, 1), (2048, 64), (256, 1024), (3, 0), (2048, 0)])
-@pytest.mark.parametrize("ncells", [1, 2, 7, 30, 31, 500, 20011])
+@pytest.mark.parametrize("ncells", [1, 2, 7, 30, 31, 500, 20011, 300_007])
 def test_prefix_sum_matches_numpy(circles_cpu, chunk, group, ncells):
     counts = np.random.default_rng(ncells).integers(0, 5, ncells)
     count, start = scan_with(chunk, group)(counts)
