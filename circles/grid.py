@@ -98,8 +98,10 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells):
     """start[c] = count[0] + ... + count[c - 1] for c <= ncells, and count[:ncells] set to 0.
 
     Integer sums, so the result is exact whatever the order. Passes (each loop one task):
-    1. each chunk's total, kept in start[] at the chunk's end;
-    2. within each group of chunks, the running total at each chunk end;
+    1. each chunk's total, kept in start[] at the chunk's end (on CUDA one warp per chunk,
+       `_warp_chunk_totals`);
+    2. within each group of chunks, the running total at each chunk end (on CUDA one warp per
+       group, `_warp_group_totals`);
     3. serially, each group's end gets the total of all groups before it;
     4. the other chunk ends get the total of the groups before theirs
        (without groups, passes 2 to 4 are one serial running total over the chunk ends);
