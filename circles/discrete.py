@@ -100,6 +100,15 @@ def _listed(a, rnd, flag: ti.template(), lists: ti.template(), side: ti.template
 
 
 @ti.func
+def _round_items(work: ti.template(), side: ti.template(), n, every: ti.template()):
+    """The length of a round's loop (`_listed`): the round's list, or every circle."""
+    items = n
+    if ti.static(not every):
+        items = work[LIST0 + side]
+    return items
+
+
+@ti.func
 def is_large(i, radius: ti.template(), spread: ti.template(), two_level: ti.template()):
     """Whether circle i is one of the few large circles of a two-level grid (see `wide_row`)."""
     large = False
@@ -312,10 +321,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
     cap = contacts.shape[0]
-    items = work[LIST0 + side]
-    if ti.static(every):
-        items = pos.shape[0]
-    for a in range(items):
+    for a in range(_round_items(work, side, pos.shape[0], every)):
         box = ti.Vector([box_w, box_h], dt=real)
         i, take = _listed(a, work[ROUND], marked, lists, side, every)
         if take:
@@ -436,17 +442,16 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
     entry); this round's list is emptied after."""
-    items = work[LIST0 + side]
-    if ti.static(every):
-        items = pos.shape[0]
-    for a in range(items):
+    for a in range(_round_items(work, side, pos.shape[0], every)):
         box = ti.Vector([box_w, box_h], dt=real)
         rnd = work[ROUND]
         i, take = _listed(a, rnd, picked, lists, side, every)
-        j = partner[i]
+        j = -1
+        if take:
+            j = partner[i]
         # A mutual pair is resolved by its lower index when both picked this round, else by the
         # one that did (the other's pick is older and still holds).
-        if take and j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
+        if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
             if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic):
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
