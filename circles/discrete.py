@@ -313,7 +313,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
           sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
           real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
-          marked: ti.template(), every: ti.template()):
+          marked: ti.template(), every: ti.template(), serial: ti.template()):
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
     The candidates are the circle's contact list (`_scan_contacts`): positions do not change
@@ -321,6 +321,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
     cap = contacts.shape[0]
+    ti.loop_config(serialize=serial)
     for a in range(_round_items(work, side, pos.shape[0], every)):
         box = ti.Vector([box_w, box_h], dt=real)
         i, take = _listed(a, work[ROUND], marked, lists, side, every)
@@ -438,10 +439,11 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
              sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
              real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
-             every: ti.template()):
+             every: ti.template(), serial: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
     entry); this round's list is emptied after."""
+    ti.loop_config(serialize=serial)
     for a in range(_round_items(work, side, pos.shape[0], every)):
         box = ti.Vector([box_w, box_h], dt=real)
         rnd = work[ROUND]
@@ -496,10 +498,11 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
 @ti.func
 def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
            wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), work: ti.template(),
-           box_w, box_h, real: ti.template(), settled_only: ti.template()):
+           box_w, box_h, real: ti.template(), settled_only: ti.template(), serial: ti.template()):
     """The wall reflections of the listed circles; with `settled_only`, only when the rounds are
     over (the next round's list, list 0 after an even number of rounds, is empty; otherwise
     more rounds come first)."""
+    ti.loop_config(serialize=serial)
     for k in range(work[WALLED]):
         box = ti.Vector([box_w, box_h], dt=real)
         if not ti.static(settled_only) or work[LIST0] == 0:
@@ -510,7 +513,7 @@ def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_ma
 def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: ndarr, wall_impulse: ndarr,
           walled: ndarr, work: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
     """The wall reflections after rounds that stopped at the round limit."""
-    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, False)
+    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, False, False)
 
 
 @ti.func
@@ -520,19 +523,22 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
             spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-            rounds: ti.template(), first_every: ti.template()):
+            rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
     """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
     lists (`rounds` is even, so every launch starts on list 0); a round after one that
     listed nothing has an empty list, so it costs two empty loops. With `first_every` the
-    first round loops over every circle instead of its list (`_listed`)."""
+    first round loops over every circle instead of its list (`_listed`). Rounds from
+    `serial_from` on (counted within this launch) run their loops on one thread
+    (see `simulation.DISCRETE_PARALLEL_ROUNDS`)."""
     for r in ti.static(range(rounds)):
         every = ti.static(first_every and r == 0)
+        serial = ti.static(r >= serial_from)
         _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
               cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level,
-              r % 2, marked, every)
+              r % 2, marked, every, serial)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
                  lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-                 periodic, two_level, r % 2, every)
+                 periodic, two_level, r % 2, every, serial)
 
 
 @ti.func
@@ -543,13 +549,15 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        wall_impulse: ti.template(), walled: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
                        spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                       rounds: ti.template(), first_every: ti.template()):
-    """`rounds` rounds, then the wall reflections if they settled (the end of both launches)."""
+                       rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
+    """`rounds` rounds, then the wall reflections if they settled (the end of both launches);
+    the walls' loop is serial when the last round's is (a few circles per thousand reach a wall)."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
             pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-            periodic, two_level, rounds, first_every)
+            periodic, two_level, rounds, first_every, serial_from)
     if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True)
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True,
+               serial_from < rounds)
 
 
 @ti.kernel
@@ -560,7 +568,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
                segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr,
                real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-               rounds: ti.template()) -> ti.i32:
+               rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
     thousand circles). Returns the length of the next round's work list: not 0 when more
@@ -572,7 +580,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, True)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, True, serial_from)
     return work[LIST0]
 
 
@@ -583,11 +591,11 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
                 wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, spread: ndarr,
                 real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                rounds: ti.template()) -> ti.i32:
+                rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, False)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, False, serial_from)
     return work[LIST0]
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import taichi as ti
 
 from . import discrete, event, placement, reductions
-from .backend import ensure_init
+from .backend import current_arch, ensure_init
 from .geometry import NEVER, spans
 from .grid import Grid
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
@@ -33,6 +33,12 @@ DISCRETE_MAX_ROUNDS = 16
 #: as the rounds alternate between two work lists. Rounds after the last busy one cost two
 #: empty loops each, far less than a launch.
 DISCRETE_FUSED_ROUNDS = 8
+#: Rounds of a discrete step whose loops run in parallel on a CPU; later ones run on one thread.
+#: Starting a parallel loop on the CPU's thread pool costs some 15-25 microseconds even when it
+#: has nothing to do, and from the third round on a work list holds a few circles in ten
+#: thousand (about 200 of 1e6 in round 3, none by round 8): on one thread they cost a few
+#: microseconds. A GPU runs every round in parallel.
+DISCRETE_PARALLEL_ROUNDS = 2
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
 #: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
@@ -461,13 +467,15 @@ class Simulation:
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
         two = self._two_level
+        parallel = DISCRETE_MAX_ROUNDS if current_arch() == "gpu" else DISCRETE_PARALLEL_ROUNDS
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, real, periodic, two,
-                                   DISCRETE_FUSED_ROUNDS)
+                                   DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
             more = min(DISCRETE_FUSED_ROUNDS, DISCRETE_MAX_ROUNDS - done)
-            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._spread, real, periodic, two, more)
+            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._spread, real, periodic, two, more,
+                                        min(max(parallel - done, 0), more))
             done += more
         self.rounds += done
         if busy and not periodic:
