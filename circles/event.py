@@ -19,6 +19,9 @@ tau). A round has three stages:
    event overall is always safe, so every round makes progress. Simultaneous safe events
    touch disjoint circles and commute, so executing them together equals any serial order.
 
+On a CPU the step runs from one queue instead (`queue_step`, below): the same events in the
+same order with the same arithmetic, without the rounds.
+
 The grid and the bounds assume every speed stays below vlim during the step. A collision
 that would exceed it (a light circle hit by a heavy one) is not executed: the step is redone
 up to that collision's time (the events before it are the same, by causality), and the next
@@ -58,6 +61,77 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
 
 
 @ti.func
+def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+              ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), moved: ti.template(),
+              cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
+              horizon, real: ti.template(), periodic: ti.template()):
+    """(time, partner) of circle i's earliest event in (tau_i, horizon], chosen by the key
+    (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
+    stored event compared with its pairs with the circles that moved (see `_predict`)."""
+    n = pos.shape[0]
+    ti_ = tau[i]
+    best_t = ti.cast(NEVER, real)
+    best_lo = n + 8
+    best_hi = n + 8
+    best_p = NO_EVENT
+    if not full:
+        best_t, best_lo, best_hi = event_key(i, ev_t, ev_p, ids, n)
+        best_p = ev_p[i]
+    if ti.static(not periodic):
+        if full:  # the wall events of a circle that did not move stand
+            xi = pos[i]
+            vi = vel[i]
+            ri = radius[i]
+            for axis in ti.static(range(2)):
+                t = ti.cast(NEVER, real)
+                w = 0
+                if vi[axis] < 0:
+                    t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
+                    w = 2 * axis
+                elif vi[axis] > 0:
+                    t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
+                    w = 2 * axis + 1
+                if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
+                    best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
+    c = cell_of[i]
+    for row, seg in ti.ndrange(rows, segs):
+        k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+        for k in range(k_lo, k_hi):
+            j = sorted_ids[k]
+            if j != i and (full or moved[j] != 0):
+                t, klo, khi = _pair_key(i, j, pos, vel, radius, tau, ids, box, real, periodic)
+                if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
+                    best_t, best_lo, best_hi, best_p = t, klo, khi, j
+    return best_t, best_p
+
+
+@ti.func
+def _pair_key(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+              ids: ti.template(), box, real: ti.template(), periodic: ti.template()):
+    """(time of impact, lo, hi) of the pair (i, j): computed from its lower slot, so that both
+    circles get it bit for bit; keys use creation ids, so ties break the same whatever the
+    memory order."""
+    t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, real, periodic)
+    return t, ti.min(ids[i], ids[j]), ti.max(ids[i], ids[j])
+
+
+@ti.func
+def event_key(i, ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """The key (time, lo, hi) of circle i's stored event: a pair's creation ids in order, a
+    wall's (id, n + wall), no event's (NEVER, n + 8, n + 8)."""
+    p = ev_p[i]
+    lo = n + 8
+    hi = n + 8
+    if p >= 0:
+        lo = ti.min(ids[i], ids[p])
+        hi = ti.max(ids[i], ids[p])
+    elif p != NO_EVENT:
+        lo = ids[i]
+        hi = n + (-1 - p)
+    return ev_t[i], lo, hi
+
+
+@ti.func
 def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ids: ti.template(),
              ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), moved: ti.template(),
              cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
@@ -77,54 +151,10 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
         box = ti.Vector([box_w, box_h], dt=real)
         if dirty[i] != 0:
             dirty[i] = 0
-            ti_ = tau[i]
-            best_t = ti.cast(NEVER, real)
-            best_lo = n + 8
-            best_hi = n + 8
-            best_p = NO_EVENT
             old_p = ev_p[i]
             full = moved[i] != 0 or (old_p >= 0 and moved[old_p] != 0)
-            if not full:
-                best_t = ev_t[i]
-                best_p = old_p
-                if old_p >= 0:
-                    best_lo = ti.min(ids[i], ids[old_p])
-                    best_hi = ti.max(ids[i], ids[old_p])
-                elif old_p != NO_EVENT:
-                    best_lo = ids[i]
-                    best_hi = n + (-1 - old_p)
-            if ti.static(not periodic):
-                if full:  # the wall events of a circle that did not move stand
-                    xi = pos[i]
-                    vi = vel[i]
-                    ri = radius[i]
-                    for axis in ti.static(range(2)):
-                        t = ti.cast(NEVER, real)
-                        w = 0
-                        if vi[axis] < 0:
-                            t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
-                            w = 2 * axis
-                        elif vi[axis] > 0:
-                            t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
-                            w = 2 * axis + 1
-                        if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
-                            best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
-            c = cell_of[i]
-            for row, seg in ti.ndrange(rows, segs):
-                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j != i and (full or moved[j] != 0):
-                        lo = ti.min(i, j)
-                        hi = ti.max(i, j)
-                        t = pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, real, periodic)
-                        # Keys use creation ids, so ties break the same whatever the memory order.
-                        klo = ti.min(ids[i], ids[j])
-                        khi = ti.max(ids[i], ids[j])
-                        if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
-                            best_t, best_lo, best_hi, best_p = t, klo, khi, j
-            ev_t[i] = best_t
-            ev_p[i] = best_p
+            ev_t[i], ev_p[i] = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of, cell_start,
+                                         sorted_ids, ncx, ncy, rows, segs, box, horizon, real, periodic)
     for i in range(n):
         moved[i] = 0
     for i in range(n):
@@ -277,6 +307,85 @@ def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, vir
     scalars[1] = ti.cast(NEVER, real)
 
 
+@ti.func
+def _wall_event(i, e, p, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                tau: ti.template(), wall_count: ti.template(), wall_impulse: ti.template(), box):
+    """Circle i meets wall -1 - p at time e: placed exactly in contact (no round-off escape
+    through the wall), its normal velocity reversed, its wall sums updated."""
+    w = -1 - p
+    axis = w // 2
+    x = pos[i] + vel[i] * (e - tau[i])
+    v = vel[i]
+    r = radius[i]
+    if w % 2 == 0:
+        x[axis] = r
+    else:
+        x[axis] = box[axis] - r
+    vn = v[axis]
+    v[axis] = -vn
+    pos[i] = x
+    vel[i] = v
+    tau[i] = e
+    wall_count[i] = wall_count[i] + 1
+    wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+
+
+@ti.func
+def _pair_event(i, j, e, horizon, vlim2, pos: ti.template(), vel: ti.template(), radius: ti.template(),
+                inv_mass: ti.template(), tau: ti.template(), ids: ti.template(), pair_count: ti.template(),
+                virial: ti.template(), box, periodic: ti.template()):
+    """Circles i and j collide at time e: both brought to e, the impulse applied when they
+    approach, the pair's sums (to the circle of lower creation id) updated. Returns 1 when the
+    impulse was applied, 2 when they touch without approaching (brought to e only), and 0 with
+    nothing changed when the impulse would make one faster than the grid allows (vlim2 its
+    square) before the horizon: the step must end there (see the module docstring)."""
+    xi = pos[i] + vel[i] * (e - tau[i])
+    xj = pos[j] + vel[j] * (e - tau[j])
+    d = displacement(xi, xj, box, periodic)
+    nrm = d.normalized()
+    vi = vel[i]
+    vj = vel[j]
+    vn = (vj - vi).dot(nrm)
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    status = 2
+    if vn < 0:
+        jmp = 2.0 * vn / (wi + wj)
+        # One expression for both circles, each with the normal towards its partner, so
+        # the rounding (fused or not) does not depend on which circle is i.
+        vi_new = vi + (wi * jmp) * nrm
+        vj_new = vj + (wj * jmp) * (-nrm)
+        if (vi_new.norm_sqr() > vlim2 or vj_new.norm_sqr() > vlim2) and e < horizon:
+            status = 0
+        else:
+            status = 1
+            vi = vi_new
+            vj = vj_new
+            # Plain updates, not atomics: a circle is in at most one executed pair at a time.
+            owner = i if ids[i] < ids[j] else j
+            pair_count[owner] = pair_count[owner] + 1
+            virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+    if status != 0:
+        pos[i] = xi
+        pos[j] = xj
+        vel[i] = vi
+        vel[j] = vj
+        tau[i] = e
+        tau[j] = e
+    return status
+
+
+@ti.func
+def _log(e, a, b, t_offset, counters: ti.template(), log_t: ti.template(), log_i: ti.template(),
+         log_j: ti.template()):
+    """Record an executed collision (time, a, b) when the log has room (counters[1] counts all)."""
+    slot = ti.atomic_add(counters[1], 1)
+    if slot < log_t.shape[0]:
+        log_t[slot] = t_offset + ti.cast(e, ti.f64)
+        log_i[slot] = a
+        log_j[slot] = b
+
+
 @ti.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
             bound_t: ndarr, dirty: ndarr, moved: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
@@ -295,76 +404,24 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
         if e <= horizon and e <= bound_t[i]:
             if p < 0 and p != NO_EVENT:
                 if ti.static(not periodic):
-                    w = -1 - p
-                    axis = w // 2
-                    x = pos[i] + vel[i] * (e - tau[i])
-                    v = vel[i]
-                    r = radius[i]
-                    # Place the circle exactly in contact: no round-off escape through the wall.
-                    if w % 2 == 0:
-                        x[axis] = r
-                    else:
-                        x[axis] = box[axis] - r
-                    vn = v[axis]
-                    v[axis] = -vn
-                    pos[i] = x
-                    vel[i] = v
-                    tau[i] = e
+                    _wall_event(i, e, p, pos, vel, radius, inv_mass, tau, wall_count, wall_impulse, box)
                     moved[i] = 1
-                    wall_count[i] = wall_count[i] + 1
-                    wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     if counters[0] == 0:
                         counters[0] = 1  # progress flag: a plain store, written once
                     if ti.static(record):
-                        slot = ti.atomic_add(counters[1], 1)
-                        if slot < log_t.shape[0]:
-                            log_t[slot] = t_offset + ti.cast(e, ti.f64)
-                            log_i[slot] = ids[i]
-                            log_j[slot] = p
+                        _log(e, ids[i], p, t_offset, counters, log_t, log_i, log_j)
             elif p > i and ev_p[p] == i and ev_t[p] == e and e <= bound_t[p]:
                 j = p
-                xi = pos[i] + vel[i] * (e - tau[i])
-                xj = pos[j] + vel[j] * (e - tau[j])
-                d = displacement(xi, xj, box, periodic)
-                nrm = d.normalized()
-                vi = vel[i]
-                vj = vel[j]
-                vn = (vj - vi).dot(nrm)
-                wi = inv_mass[i]
-                wj = inv_mass[j]
-                execute_it = True
-                if vn < 0:
-                    jmp = 2.0 * vn / (wi + wj)
-                    # One expression for both circles, each with the normal towards its partner, so
-                    # the rounding (fused or not) does not depend on which circle is i.
-                    vi_new = vi + (wi * jmp) * nrm
-                    vj_new = vj + (wj * jmp) * (-nrm)
-                    if (vi_new.norm_sqr() > vlim2 or vj_new.norm_sqr() > vlim2) and e < horizon:
-                        # Faster than the grid allows: end the step here (see module docstring).
-                        ti.atomic_min(scalars[1], e)
-                        execute_it = False
-                    else:
-                        vi = vi_new
-                        vj = vj_new
-                        # Sums go to the circle of lower creation id (j's thread is idle: its event is this one).
-                        # Plain updates, not atomics: a circle is in at most one executed pair per round.
-                        owner = i if ids[i] < ids[j] else j
-                        pair_count[owner] = pair_count[owner] + 1
-                        virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
-                        if ti.static(record):
-                            slot = ti.atomic_add(counters[1], 1)
-                            if slot < log_t.shape[0]:
-                                log_t[slot] = t_offset + ti.cast(e, ti.f64)
-                                log_i[slot] = ti.min(ids[i], ids[j])
-                                log_j[slot] = ti.max(ids[i], ids[j])
-                if execute_it:
-                    pos[i] = xi
-                    pos[j] = xj
-                    vel[i] = vi
-                    vel[j] = vj
-                    tau[i] = e
-                    tau[j] = e
+                status = _pair_event(i, j, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
+                                     virial, box, periodic)
+                if status == 0:
+                    ti.atomic_min(scalars[1], e)  # the step is cut here
+                else:
+                    if ti.static(record):
+                        if status == 1:
+                            _log(e, ti.min(ids[i], ids[j]), ti.max(ids[i], ids[j]), t_offset, counters, log_t,
+                                 log_i, log_j)
                     moved[i] = 1
                     moved[j] = 1
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
@@ -374,6 +431,200 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
     result = counters[0]
     if scalars[1] < horizon:
         result = -1  # a collision would outrun the grid: the step is cut at scalars[1]
+    return result
+
+
+# ------------------------------------------------------------------ one queue (CPU)
+#
+# On a CPU a step can run its events one at a time from a queue instead: one full prediction
+# (in parallel), then the earliest event of all, always safe, executed and its neighbourhood
+# predicted again, until none is left before the step's end. The events, their order and the
+# arithmetic of each are those of the rounds (independent events touch disjoint circles and
+# commute bit for bit), so the state is the same bit for bit; what goes is the rounds' cost:
+# the bound sweeps, and every round's passes over all circles. A GPU runs the rounds.
+
+
+@ti.func
+def _heap_less(k, m, heap_t: ti.template(), heap_lo: ti.template(), heap_hi: ti.template()):
+    """Whether the event in queue slot k comes before the one in slot m (by key)."""
+    return key_less(heap_t[k], heap_lo[k], heap_hi[k], heap_t[m], heap_lo[m], heap_hi[m])
+
+
+@ti.func
+def _heap_swap(k, m, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+               heap_hi: ti.template()):
+    a = heap[k]
+    b = heap[m]
+    heap[k] = b
+    heap[m] = a
+    where[b] = k
+    where[a] = m
+    t = heap_t[k]
+    heap_t[k] = heap_t[m]
+    heap_t[m] = t
+    lo = heap_lo[k]
+    heap_lo[k] = heap_lo[m]
+    heap_lo[m] = lo
+    hi = heap_hi[k]
+    heap_hi[k] = heap_hi[m]
+    heap_hi[m] = hi
+
+
+@ti.func
+def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+             heap_hi: ti.template()):
+    while k > 0:
+        parent = (k - 1) // 2
+        if _heap_less(k, parent, heap_t, heap_lo, heap_hi):
+            _heap_swap(k, parent, heap, where, heap_t, heap_lo, heap_hi)
+            k = parent
+        else:
+            break
+    return k
+
+
+@ti.func
+def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+               heap_hi: ti.template()):
+    while 2 * k + 1 < size:
+        m = 2 * k + 1
+        if m + 1 < size and _heap_less(m + 1, m, heap_t, heap_lo, heap_hi):
+            m += 1
+        if _heap_less(m, k, heap_t, heap_lo, heap_hi):
+            _heap_swap(k, m, heap, where, heap_t, heap_lo, heap_hi)
+            k = m
+        else:
+            break
+
+
+@ti.func
+def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+              heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """Put circle x where its (changed) event belongs in the queue, which holds each circle with
+    an event once, with its key: in it when it has an event, out of it when not. Returns the
+    new size."""
+    k = where[x]
+    if ev_p[x] != NO_EVENT:
+        if k < 0:
+            k = size
+            heap[k] = x
+            where[x] = k
+            size += 1
+        heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
+        k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
+        _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+    elif k >= 0:
+        size -= 1
+        where[x] = -1
+        if k < size:
+            last = heap[size]
+            heap[k] = last
+            where[last] = k
+            heap_t[k] = heap_t[size]
+            heap_lo[k] = heap_lo[size]
+            heap_hi[k] = heap_hi[size]
+            k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
+            _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+    return size
+
+
+@ti.kernel
+def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
+               ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, heap_lo: ndarr,
+               heap_hi: ndarr, pair_count: ndarr, wall_count: ndarr,
+               virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
+               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+               t_offset: ti.f64, scalars: ndarr, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
+               real: ti.template(), periodic: ti.template(), record: ti.template()) -> ti.i32:
+    """A whole step from one queue (see above). Returns the number of events executed, -1 when
+    a collision would outrun the grid (scalars[1] is its time: the step is redone up to it, as
+    with the rounds), or -2 when the earliest event is not its partner's (an internal error)."""
+    n = pos.shape[0]
+    horizon = ti.cast(t_end, real)
+    vlim2 = ti.cast(vlim, real) ** 2
+    for i in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
+        ev_t[i], ev_p[i] = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start,
+                                     sorted_ids, ncx, ncy, rows, segs, box, horizon, real, periodic)
+        where[i] = -1
+        stamp[i] = 0
+    result = 0
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        box = ti.Vector([box_w, box_h], dt=real)
+        size = 0
+        for i in range(n):
+            if ev_p[i] != NO_EVENT:
+                heap[size] = i
+                where[i] = size
+                heap_t[size], heap_lo[size], heap_hi[size] = event_key(i, ev_t, ev_p, ids, n)
+                size += 1
+        k = size // 2 - 1
+        while k >= 0:
+            _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+            k -= 1
+        executed = 0
+        while size > 0:
+            c = heap[0]
+            e = ev_t[c]
+            p = ev_p[c]
+            changed = 1
+            if p >= 0:
+                if ev_p[p] != c or ev_t[p] != e:
+                    result = -2
+                    break
+                status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
+                                     virial, box, periodic)
+                if status == 0:
+                    scalars[1] = e
+                    result = -1
+                    break
+                if ti.static(record):
+                    if status == 1:
+                        _log(e, ti.min(ids[c], ids[p]), ti.max(ids[c], ids[p]), t_offset, counters, log_t, log_i,
+                             log_j)
+                changed = 2
+            else:
+                if ti.static(not periodic):
+                    _wall_event(c, e, p, pos, vel, radius, inv_mass, tau, wall_count, wall_impulse, box)
+                    if ti.static(record):
+                        _log(e, ids[c], p, t_offset, counters, log_t, log_i, log_j)
+            executed += 1
+            # Only pairs with c (and p) changed: a neighbour whose event was with one of them
+            # searches again in full, any other compares its event with its pairs with them.
+            for q in range(changed):
+                y = c
+                if q == 1:
+                    y = p
+                for row, seg in ti.ndrange(rows, segs):
+                    k_lo, k_hi = neighbour_range(cell_of[y], row, seg, cell_start, ncx, ncy, periodic)
+                    for kk in range(k_lo, k_hi):
+                        x = sorted_ids[kk]
+                        if stamp[x] != executed:
+                            stamp[x] = executed
+                            xp = ev_p[x]
+                            fix = True
+                            if x == c or (changed == 2 and x == p) or xp == c or (changed == 2 and xp == p):
+                                ev_t[x], ev_p[x] = _earliest(x, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp,
+                                                             cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
+                                                             box, horizon, real, periodic)
+                            else:
+                                bt, blo, bhi = event_key(x, ev_t, ev_p, ids, n)
+                                bp = xp
+                                for r in range(changed):
+                                    z = c
+                                    if r == 1:
+                                        z = p
+                                    t, klo, khi = _pair_key(x, z, pos, vel, radius, tau, ids, box, real, periodic)
+                                    if t <= horizon and key_less(t, klo, khi, bt, blo, bhi):
+                                        bt, blo, bhi, bp = t, klo, khi, z
+                                fix = bp != xp or bt != ev_t[x]
+                                ev_t[x] = bt
+                                ev_p[x] = bp
+                            if fix:
+                                size = _heap_fix(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
+        if result == 0:
+            result = executed
     return result
 
 

@@ -1,8 +1,9 @@
 """Simulation: the time-varying state of a scene and the stepper that advances it.
 
 A step of the event scheme reads as its stages: largest speed, grid, backup, then rounds
-of predict / bound / bound / execute until no event is left before the step's end, then
-every circle advances to the end (see `circles.event`). A step of the discrete scheme:
+of predict / bound / bound / execute until no event is left before the step's end (on a CPU:
+one queue of events instead of the rounds), then every circle advances to the end (see
+`circles.event`). A step of the discrete scheme:
 move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 """
 from __future__ import annotations
@@ -39,6 +40,10 @@ DISCRETE_FUSED_ROUNDS = 8
 #: thousand (about 200 of 1e6 in round 3, none by round 8): on one thread they cost a few
 #: microseconds. A GPU runs every round in parallel.
 DISCRETE_PARALLEL_ROUNDS = 2
+#: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
+#: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
+#: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
+EVENT_QUEUE_ON_CPU = True
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
 #: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
@@ -223,6 +228,7 @@ class Simulation:
         self._log_i = ti.ndarray(ti.i32, shape=cap)
         self._log_j = ti.ndarray(ti.i32, shape=cap)
         if scheme == "event":
+            self._event_queue = EVENT_QUEUE_ON_CPU and current_arch() == "cpu"
             self._alloc_event_arrays()
         if scheme == "discrete":
             self._partner = ti.ndarray(ti.i32, shape=n)
@@ -270,6 +276,7 @@ class Simulation:
         self._d1 = ti.ndarray(real, shape=n)
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
+        self._heap_hi = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         self._backup = {name: self._like(getattr(self, name))
                         for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
 
@@ -416,6 +423,8 @@ class Simulation:
                          self._dirty, self._moved, self._scalars, real)
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
+        if self._event_queue:
+            return self._queue_step(t_end, vlim, log_count)
         sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
         while True:
             tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
@@ -440,23 +449,52 @@ class Simulation:
             self.rounds += 1
             if executed < 0:
                 # A collision would outrun the grid: redo the step up to it (see circles.event).
-                cut = float(self._scalars.to_numpy()[1])
-                for name, arr in self._backup.items():
-                    reductions.copy_vec(arr, getattr(self, name))
-                reductions.fill_real(self.tau, 0.0)
-                reductions.fill_i32(self._dirty, 1)
-                reductions.fill_i32(self._moved, 1)
-                if record:
-                    self._set_counter(1, log_count)
-                self._set_scalars(NEVER, NEVER)
-                t_end = cut
-                self.redone_steps += 1
+                t_end = self._redo(log_count)
                 continue
             if executed == 0:
                 raise RuntimeError(f"event rounds made no progress at step time {self._scalars.to_numpy()[0]} "
                                    "(internal error)")
         event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
         return t_end
+
+    def _queue_step(self, t_end, vlim, log_count):
+        """The rest of an event step from one queue (see `EVENT_QUEUE_ON_CPU`); returns as `_event_step`."""
+        w, hgt = self.box
+        real, periodic, record = self._real, self.periodic, self._record_cap > 0
+        g = self.grid.args()
+        while True:
+            # The rounds' arrays (bounds, flags) hold the queue: circles, places, keys.
+            executed = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
+                                        self._ev_p, self._dirty, *self._active, self._d1, self._moved, self._heap_hi,
+                                        self.pair_count, self.wall_count,
+                                        self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
+                                        self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
+                                        periodic, record)
+            self.rounds += 1
+            if executed == -1:
+                t_end = self._redo(log_count)
+                continue
+            if executed < 0:
+                raise RuntimeError(f"the earliest event of the queue was not its partner's at step time "
+                                   f"{t_end} (internal error)")
+            break
+        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
+        return t_end
+
+    def _redo(self, log_count):
+        """Restore the state at the step's start for a step cut short at the collision that would
+        outrun the grid; returns the cut time (see circles.event)."""
+        cut = float(self._scalars.to_numpy()[1])
+        for name, arr in self._backup.items():
+            reductions.copy_vec(arr, getattr(self, name))
+        reductions.fill_real(self.tau, 0.0)
+        reductions.fill_i32(self._dirty, 1)
+        reductions.fill_i32(self._moved, 1)
+        if self._record_cap > 0:
+            self._set_counter(1, log_count)
+        self._set_scalars(NEVER, NEVER)
+        self.redone_steps += 1
+        return cut
 
     def _discrete_step(self, h):
         w, hgt = self.box

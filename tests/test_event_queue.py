@@ -1,0 +1,71 @@
+"""The event scheme's two executions agree bit for bit: rounds with causal bounds (the GPU's)
+and one queue of events (the CPU's, `simulation.EVENT_QUEUE_ON_CPU`).
+
+Both execute the same collisions in the same order with the same arithmetic per event, and
+independent events touch disjoint circles, so the states must be equal exactly, not to a
+tolerance: positions, velocities, collision counts, the pressure sums and the event log. The
+scenes cover both boundaries and precisions, three mass models, a radius spread and steps cut
+short because a collision would outrun the grid (light circles hit by heavy ones). Elsewhere
+the suite runs the CPU's default, the queue, against the serial reference (test_reference)."""
+
+import numpy as np
+import pytest
+
+from conftest import TEST_ARCH
+
+SCENES = {
+    "walls-f64-radius": dict(n=1500, box=(1.0, 1.0), radius=(0.004, 0.008), speed=(0.5, 1.0), boundary="walls",
+                             precision="f64", mass="radius"),
+    "periodic-f64-area": dict(n=1500, box=(1.0, 1.0), radius=(0.004, 0.008), speed=(0.5, 1.0),
+                              boundary="periodic", precision="f64", mass="area"),
+    "walls-f32-equal": dict(n=2000, box=(0.8, 0.8), radius=0.006, speed=(0.5, 1.0), boundary="walls",
+                            precision="f32", mass="equal"),
+    "periodic-f32-dense": dict(n=2000, box=(0.55, 0.55), radius=0.006, speed=(0.1, 1.0), boundary="periodic",
+                               precision="f32", mass="radius"),
+    "walls-f64-spread": dict(n=1200, box=(0.7, 0.7), radius=(0.002, 0.01), speed=(0.5, 1.0), boundary="walls",
+                             precision="f64", mass="area"),
+}
+
+
+def run(circles, monkeypatch, scene, queue, steps=25):
+    from circles import simulation
+    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+    sim = circles.Simulation(circles.Scene(scheme="event", seed=3, **scene), record_events=100_000)
+    assert sim._event_queue == (queue and TEST_ARCH == "cpu")
+    sim.step(steps)
+    return sim
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("name", SCENES)
+def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
+    rounds = run(circles_cpu, monkeypatch, SCENES[name], False)
+    queue = run(circles_cpu, monkeypatch, SCENES[name], True)
+    a, b = rounds.state(), queue.state()
+    assert np.array_equal(a.pos, b.pos)
+    assert np.array_equal(a.vel, b.vel)
+    sa, sb = rounds.stats(), queue.stats()
+    for key in ("pair_collisions", "wall_collisions", "virial", "wall_impulse", "kinetic_energy"):
+        assert sa[key] == sb[key], key
+    ea, eb = rounds.events(), queue.events()
+    assert len(ea) == sa["pair_collisions"] + sa["wall_collisions"] > 0
+    assert np.array_equal(ea, eb)
+    assert rounds.time == queue.time
+    # One launch per step for the queue (two more per step cut short: the redo, and the rest of
+    # the step), several rounds per step for the other.
+    assert queue.rounds <= queue.steps + 2 * queue.redone_steps < rounds.rounds
+    if name in ("walls-f64-radius", "walls-f64-spread"):
+        # Both cut steps short here (a light circle hit by a heavy one), at the same collisions.
+        assert queue.redone_steps > 0
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_queue_step_to_an_exact_time(circles_cpu, monkeypatch):
+    """advance() ends steps at a given time (a step shorter than dt): the same in both."""
+    states = []
+    for queue in (False, True):
+        sim = run(circles_cpu, monkeypatch, SCENES["walls-f32-equal"], queue, steps=3)
+        sim.advance(0.37 * sim.dt)
+        states.append(sim.state())
+    assert np.array_equal(states[0].pos, states[1].pos)
+    assert np.array_equal(states[0].vel, states[1].vel)
