@@ -36,10 +36,13 @@ DISCRETE_MAX_ROUNDS = 16
 DISCRETE_FUSED_ROUNDS = 8
 #: Rounds of a discrete step whose loops run in parallel on a CPU; later ones run on one thread.
 #: Starting a parallel loop on the CPU's thread pool costs some 15-25 microseconds even when it
-#: has nothing to do, and from the third round on a work list holds a few circles in ten
-#: thousand (about 200 of 1e6 in round 3, none by round 8): on one thread they cost a few
-#: microseconds. A GPU runs every round in parallel.
-DISCRETE_PARALLEL_ROUNDS = 2
+#: has nothing to do, while one thread takes 100-150 ns per listed circle. Round 3's list holds
+#: about 1% of the circles, round 5's about 0.02% (at 1e6: 10062 and 195), none by round 8. So
+#: up to DISCRETE_SMALL_N circles two rounds run in parallel, above it four. A GPU runs every
+#: round in parallel.
+DISCRETE_PARALLEL_ROUNDS = 4
+DISCRETE_SMALL_N = 30_000
+DISCRETE_PARALLEL_ROUNDS_SMALL_N = 2
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
 #: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
@@ -505,7 +508,10 @@ class Simulation:
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
         two = self._two_level
-        parallel = DISCRETE_MAX_ROUNDS if current_arch() == "gpu" else DISCRETE_PARALLEL_ROUNDS
+        if current_arch() == "gpu":
+            parallel = DISCRETE_MAX_ROUNDS
+        else:
+            parallel = DISCRETE_PARALLEL_ROUNDS_SMALL_N if self.n <= DISCRETE_SMALL_N else DISCRETE_PARALLEL_ROUNDS
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, real, periodic, two,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
         done = DISCRETE_FUSED_ROUNDS
