@@ -234,6 +234,12 @@ class Simulation:
             self._event_queue = EVENT_QUEUE_ON_CPU and current_arch() == "cpu"
             self._alloc_event_arrays()
         if scheme == "discrete":
+            if current_arch() == "gpu":
+                self._parallel_rounds = DISCRETE_MAX_ROUNDS
+            elif n <= DISCRETE_SMALL_N:
+                self._parallel_rounds = DISCRETE_PARALLEL_ROUNDS_SMALL_N
+            else:
+                self._parallel_rounds = DISCRETE_PARALLEL_ROUNDS
             self._partner = ti.ndarray(ti.i32, shape=n)
             self._picked = ti.ndarray(ti.i32, shape=n)
             self._marked = ti.ndarray(ti.i32, shape=n)
@@ -508,10 +514,7 @@ class Simulation:
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
         two = self._two_level
-        if current_arch() == "gpu":
-            parallel = DISCRETE_MAX_ROUNDS
-        else:
-            parallel = DISCRETE_PARALLEL_ROUNDS_SMALL_N if self.n <= DISCRETE_SMALL_N else DISCRETE_PARALLEL_ROUNDS
+        parallel = self._parallel_rounds
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, real, periodic, two,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
         done = DISCRETE_FUSED_ROUNDS
