@@ -32,7 +32,7 @@ DISCRETE_STEP_FRACTION = 0.2
 DISCRETE_MAX_ROUNDS = 16
 #: Rounds run in the same launch as the move and the grid (more follow only when needed); even,
 #: as the rounds alternate between two work lists. Rounds after the last busy one cost two
-#: empty loops each, far less than a launch.
+#: empty loops each: on a CPU serial ones (see DISCRETE_PARALLEL_ROUNDS), about a microsecond each.
 DISCRETE_FUSED_ROUNDS = 8
 #: Rounds of a discrete step whose loops run in parallel on a CPU; later ones run on one thread.
 #: Starting a parallel loop on the CPU's thread pool costs some 15-25 microseconds even when it
