@@ -49,3 +49,16 @@ def ensure_init() -> str:
 
 def current_arch() -> str | None:
     return _state["arch"]
+
+
+#: Up to this many circles, the loops of a step on a CPU run on one thread: starting a parallel
+#: loop on the CPU's thread pool costs tens of microseconds, more than a loop over a few
+#: thousand circles (on this project's 2-core machine, side by side: a discrete step runs at
+#: 1.6 times the circle-steps/s of two threads at 1e3, 1.0 to 1.5 times at 1e4, even at 3e4,
+#: 0.65 to 0.85 times at 1e5).
+SERIAL_N = 20_000
+
+
+def serial_loops(n: int) -> bool:
+    """Whether the per-step loops over n circles run on one thread (see `SERIAL_N`)."""
+    return current_arch() == "cpu" and n <= SERIAL_N

@@ -27,6 +27,7 @@ collisions can be missed or counted twice.
 """
 import taichi as ti
 
+from . import launch
 from .geometry import NEVER, displacement, forward_fits, forward_parts, forward_range, neighbour_range, wide_row
 from .grid import enter_cell, finish_cells
 
@@ -73,7 +74,7 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
 
 
 @ti.func
-def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.template(), side: ti.template()):
+def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.template(), side):
     """Put k on the work list of round `rnd` (list `side`), once: marked[k] is the last round
     k was listed for, and round numbers only grow."""
     if marked[k] < rnd:
@@ -82,7 +83,7 @@ def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.templa
 
 
 @ti.func
-def _listed(a, rnd, flag: ti.template(), lists: ti.template(), side: ti.template(), every: ti.template()):
+def _listed(a, rnd, flag: ti.template(), lists: ti.template(), side, every: ti.template()):
     """(circle, whether it takes part) for item a of a round's loop: the a-th entry of the
     round's work list, or with `every` circle a itself when flag[a] is the round's number
     (`marked` in the pick pass, `picked` in the resolve pass, which changes `marked`).
@@ -101,7 +102,7 @@ def _listed(a, rnd, flag: ti.template(), lists: ti.template(), side: ti.template
 
 
 @ti.func
-def _round_items(work: ti.template(), side: ti.template(), n, every: ti.template()):
+def _round_items(work: ti.template(), side, n, every: ti.template()):
     """The length of a round's loop (`_listed`): the round's list, or every circle."""
     items = n
     if ti.static(not every):
@@ -293,7 +294,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
           contacts: ti.template(), n_contacts: ti.template(),
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
           sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
+          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side,
           marked: ti.template(), every: ti.template(), serial: ti.template()):
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
@@ -345,7 +346,7 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
                         lists: ti.template(), work: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
                         cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
                         segs, box, spread: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                        side: ti.template()):
+                        side):
     """List i and every circle overlapping it for a new pick in round `rnd`.
 
     Positions do not move between rounds, so only pairs with i can change their key when i's
@@ -375,7 +376,7 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
                       contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
                       cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
                       spread: ti.template(), real: ti.template(), periodic: ti.template(),
-                      two_level: ti.template(), side: ti.template()):
+                      two_level: ti.template(), side):
     """x's velocity changed in its pair with y: list what must pick again in round `rnd`.
 
     Most circles overlap only their partner. Such a circle's next pick is made here, from that
@@ -419,7 +420,7 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
              sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side: ti.template(),
+             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side,
              every: ti.template(), serial: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
@@ -490,7 +491,7 @@ def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_ma
             _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
 
 
-@ti.kernel
+@launch.kernel
 def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: ndarr, wall_impulse: ndarr,
           walled: ndarr, work: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
     """The wall reflections after rounds that stopped at the round limit."""
@@ -505,13 +506,19 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
             spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
             rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
-    """`rounds` rounds of pick and resolve as top-level loops, alternating between the two work
-    lists (`rounds` is even, so every launch starts on list 0); a round after one that
-    listed nothing has an empty list, so it costs two empty loops. With `first_every` the
-    first round loops over every circle instead of its list (`_listed`). Rounds from
-    `serial_from` on (counted within this launch) run their loops on one thread
-    (see `simulation.DISCRETE_PARALLEL_ROUNDS`)."""
-    for r in ti.static(range(rounds)):
+    """`rounds` rounds of pick and resolve, alternating between the two work lists (`rounds` is
+    even, so every launch starts on list 0); a round after one that listed nothing has an
+    empty list, so it costs two empty loops. With `first_every` the first round loops over
+    every circle instead of its list (`_listed`).
+
+    Rounds before `serial_from` (counted within this launch) are top-level loops, which run in
+    parallel; the rounds from `serial_from` on (see `simulation.DISCRETE_PARALLEL_ROUNDS`) run
+    on one thread, as one serial loop over the rounds, so their code is compiled once, not
+    once per round (a step of a small scene is all serial: its kernel compiles in a fraction
+    of the time)."""
+    # The first round of a step loops over every circle: always a code of its own.
+    unrolled = ti.static(max(min(serial_from, rounds), 1 if first_every else 0))
+    for r in ti.static(range(unrolled)):
         every = ti.static(first_every and r == 0)
         serial = ti.static(r >= serial_from)
         _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
@@ -520,6 +527,15 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
                  lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
                  periodic, two_level, r % 2, every, serial)
+    if ti.static(unrolled < rounds):
+        ti.loop_config(serialize=True)
+        for r in range(unrolled, rounds):
+            _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists,
+                  work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic,
+                  two_level, r % 2, marked, False, True)
+            _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                     n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                     spread, real, periodic, two_level, r % 2, False, True)
 
 
 @ti.func
@@ -541,7 +557,7 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                serial_from < rounds)
 
 
-@ti.kernel
+@launch.kernel
 def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
                marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
@@ -554,7 +570,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
     thousand circles). Returns the length of the next round's work list: not 0 when more
     rounds are needed (the walls wait for them)."""
-    # serial_from = 0: the whole step on one thread (see simulation.DISCRETE_SERIAL_N).
+    # serial_from = 0: the whole step on one thread (see backend.SERIAL_N).
     serial = ti.static(serial_from == 0)
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
           box_w, box_h, real, periodic, serial)
@@ -567,7 +583,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     return work[LIST0]
 
 
-@ti.kernel
+@launch.kernel
 def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
                 marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
                 lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
@@ -582,7 +598,7 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
     return work[LIST0]
 
 
-@ti.kernel
+@launch.kernel
 def list_large(radius: ndarr, r_cut: ti.f64, large: ndarr, work: ndarr):
     """The slots of the circles larger than r_cut (in any order), work[NLARGE] of them."""
     work[NLARGE] = 0

@@ -39,6 +39,7 @@ step rebuilds the grid for the new speeds.
 """
 import taichi as ti
 
+from . import launch
 from .discrete import NLARGE
 from .geometry import NEVER, NO_EVENT, cell_coords, displacement, key_less, neighbour_range, wide_row
 
@@ -143,7 +144,7 @@ def _at(k, coarse, sorted_ids: ti.template(), coarse_ids: ti.template(), radius:
     return j
 
 
-@ti.kernel
+@launch.kernel
 def build_coarse(large: ndarr, work: ndarr, cell_of: ndarr, coarse_start: ndarr, coarse_ids: ndarr, ncx: ti.i32,
                  mx: ti.i32, my: ti.i32, ncx_c: ti.i32, ncy_c: ti.i32):
     """The coarse level of a two-level grid: the work[NLARGE] large circles listed in `large`,
@@ -377,7 +378,7 @@ def _sweeps(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: 
     return changed
 
 
-@ti.kernel
+@launch.kernel
 def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
                 dirty: ndarr, moved: ndarr, d: ndarr, active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64,
@@ -397,7 +398,7 @@ def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, e
     return result
 
 
-@ti.kernel
+@launch.kernel
 def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_a: ndarr,
                 active_b: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
                 rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
@@ -406,7 +407,7 @@ def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
                    rows, segs, box_w, box_h, t_end, vlim, real, periodic)
 
 
-@ti.kernel
+@launch.kernel
 def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
                pos_b: ndarr, vel_b: ndarr, pair_count_b: ndarr, wall_count_b: ndarr, virial_b: ndarr,
                wall_impulse_b: ndarr, dirty: ndarr, moved: ndarr, scalars: ndarr, real: ti.template()):
@@ -504,7 +505,7 @@ def _log(e, a, b, t_offset, counters: ti.template(), log_t: ti.template(), log_i
         log_j[slot] = b
 
 
-@ti.kernel
+@launch.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
             bound_t: ndarr, dirty: ndarr, moved: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
             cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
@@ -646,7 +647,7 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
     return size
 
 
-@ti.kernel
+@launch.kernel
 def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
                ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, heap_lo: ndarr,
                heap_hi: ndarr, pair_count: ndarr, wall_count: ndarr,
@@ -757,7 +758,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     return result
 
 
-@ti.kernel
+@launch.kernel
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
            real: ti.template(), periodic: ti.template()):
     horizon = ti.cast(t_end, real)

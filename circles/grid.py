@@ -18,6 +18,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from . import launch
 from .geometry import cell_index, cell_total, cells_in, spans
 
 
@@ -50,12 +51,14 @@ WARP = 32
 @ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
-                inv_ch, masked: ti.template(), periodic: ti.template()):
-    """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel.
+                inv_ch, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
+    """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel;
+    with `serial`, every loop on one thread (see backend.SERIAL_N).
 
     `cell_count` must be all zero on entry; it is left all zero (each chunk clears its counts
     once it has turned them into starts), so no pass clears it.
     """
+    ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         use = True
         if ti.static(masked):
@@ -64,7 +67,7 @@ def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template
             enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
         else:
             cell_of[i] = -1
-    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, False)
+    finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
 
 
 @ti.func
@@ -86,7 +89,7 @@ def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti
 def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), cell_start: ti.template(),
                  sorted_ids: ti.template(), ncx, ncy, periodic: ti.template(), serial: ti.template()):
     """The stages after counting: cell starts, then ids scattered into their slots; with
-    `serial`, every loop on one thread (see simulation.DISCRETE_SERIAL_N)."""
+    `serial`, every loop on one thread (see backend.SERIAL_N)."""
     prefix_sum(cell_count, cell_start, cells_in(ncx, ncy, periodic), serial)
     ti.loop_config(serialize=serial)
     for i in range(cell_of.shape[0]):
@@ -246,20 +249,22 @@ def _warp_fill_starts(count: ti.template(), start: ti.template(), ncells, nchunk
             carry += ti.simt.warp.shfl_sync_i32(full, x, WARP - 1)
 
 
-@ti.kernel
+@launch.kernel
 def _build(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
            slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1),
            cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
-           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template(), periodic: ti.template()):
+           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
     build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, masked,
-                periodic)
+                periodic, serial)
 
 
 class Grid:
     """Cell lists over a fixed number of circles, with a fixed cell capacity."""
 
-    def __init__(self, n: int, box, periodic: bool, max_cells=None):
+    def __init__(self, n: int, box, periodic: bool, max_cells=None, serial=False):
+        """`serial`: build on one thread (see backend.SERIAL_N)."""
         self.n = n
+        self.serial = bool(serial)
         self.box = (float(box[0]), float(box[1]))
         self.periodic = periodic
         self.max_cells = max_cells or max(64, 3 * n)
@@ -296,7 +301,7 @@ class Grid:
         """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
         mask, *rest = self.prepare(reach)
         masked = include is not None
-        _build(pos, include if masked else mask, *rest, masked, self.periodic)
+        _build(pos, include if masked else mask, *rest, masked, self.periodic, self.serial)
 
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""

@@ -1,6 +1,7 @@
 """Whole-array kernels: largest speed with a finiteness check, largest overlap, copies."""
 import taichi as ti
 
+from . import launch
 from .backend import current_arch
 from .geometry import displacement, neighbour_range
 
@@ -25,19 +26,22 @@ def _speed(pos: ti.template(), vel: ti.template(), i):
     return v.norm(), bad
 
 
-def max_speed(pos, vel, out) -> float:
+def max_speed(pos, vel, out, serial=False) -> float:
     """Largest |v|, or minus the number of circles with a non-finite position or velocity.
 
     `out`: a float64 ndarray of 2 elements. One launch, whose kernel returns the value (a
-    separate read-back would cost a second launch).
+    separate read-back would cost a second launch). `serial`: on one thread, on a CPU (see
+    backend.SERIAL_N).
     """
-    return _max_speed(pos, vel, out, STRIDED_THREADS if current_arch() == "gpu" else 0)
+    if current_arch() == "gpu":
+        return _max_speed(pos, vel, out, STRIDED_THREADS)
+    return _max_speed(pos, vel, out, -1 if serial else 0)
 
 
-@ti.kernel
+@launch.kernel
 def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti.f64:
-    """`max_speed` as one loop over the circles (threads = 0), or as `threads` threads that
-    each take every threads-th circle."""
+    """`max_speed` as one loop over the circles (threads = 0; -1: on one thread), or as
+    `threads` threads that each take every threads-th circle."""
     out[0] = 0.0
     out[1] = 0.0
     n = pos.shape[0]
@@ -56,6 +60,7 @@ def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti
             if top > out[0]:
                 ti.atomic_max(out[0], top)
     else:
+        ti.loop_config(serialize=threads < 0)
         for i in range(n):
             s, bad = _speed(pos, vel, i)
             if bad > 0:
@@ -69,7 +74,7 @@ def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti
     return result
 
 
-@ti.kernel
+@launch.kernel
 def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, out: ndarr,
                 periodic: ti.template()) -> ti.f64:
@@ -91,43 +96,46 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
     return out[0]
 
 
-@ti.kernel
+@launch.kernel
 def copy_vec(src: ndarr, dst: ndarr):
     for i in range(src.shape[0]):
         dst[i] = src[i]
 
 
 @ti.func
-def _permute_one(arr: ti.template(), scratch: ti.template(), order: ti.template()):
+def _permute_one(arr: ti.template(), scratch: ti.template(), order: ti.template(), serial: ti.template()):
+    ti.loop_config(serialize=serial)
     for k in range(arr.shape[0]):
         scratch[k] = arr[order[k]]
+    ti.loop_config(serialize=serial)
     for k in range(arr.shape[0]):
         arr[k] = scratch[k]
 
 
-@ti.kernel
+@launch.kernel
 def permute_state(order: ndarr, pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr,
                   pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr, vec_scratch: ndarr,
-                  real_scratch: ndarr, int_scratch: ndarr, f64_scratch: ndarr):
-    """arr[k] = arr[order[k]] for every per-circle array, in one launch (scratch arrays of each kind)."""
-    _permute_one(pos, vec_scratch, order)
-    _permute_one(vel, vec_scratch, order)
-    _permute_one(radius, real_scratch, order)
-    _permute_one(inv_mass, real_scratch, order)
-    _permute_one(ids, int_scratch, order)
-    _permute_one(pair_count, int_scratch, order)
-    _permute_one(wall_count, int_scratch, order)
-    _permute_one(virial, f64_scratch, order)
-    _permute_one(wall_impulse, f64_scratch, order)
+                  real_scratch: ndarr, int_scratch: ndarr, f64_scratch: ndarr, serial: ti.template()):
+    """arr[k] = arr[order[k]] for every per-circle array, in one launch (scratch arrays of each kind);
+    with `serial`, on one thread (see backend.SERIAL_N)."""
+    _permute_one(pos, vec_scratch, order, serial)
+    _permute_one(vel, vec_scratch, order, serial)
+    _permute_one(radius, real_scratch, order, serial)
+    _permute_one(inv_mass, real_scratch, order, serial)
+    _permute_one(ids, int_scratch, order, serial)
+    _permute_one(pair_count, int_scratch, order, serial)
+    _permute_one(wall_count, int_scratch, order, serial)
+    _permute_one(virial, f64_scratch, order, serial)
+    _permute_one(wall_impulse, f64_scratch, order, serial)
 
 
-@ti.kernel
+@launch.kernel
 def fill_i32(dst: ndarr, value: ti.i32):
     for i in range(dst.shape[0]):
         dst[i] = value
 
 
-@ti.kernel
+@launch.kernel
 def _fill_real(dst: ndarr, value: ti.f64, real: ti.template()):
     for i in range(dst.shape[0]):
         dst[i] = ti.cast(value, real)

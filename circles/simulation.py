@@ -15,7 +15,7 @@ import numpy as np
 import taichi as ti
 
 from . import discrete, event, placement, reductions
-from .backend import current_arch, ensure_init
+from .backend import current_arch, ensure_init, serial_loops
 from .geometry import NEVER, spans
 from .grid import Grid
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
@@ -40,10 +40,6 @@ DISCRETE_FUSED_ROUNDS = 8
 #: about 1% of the circles, round 5's about 0.02% (at 1e6: 10062 and 195), none by round 8. So
 #: four rounds run in parallel. A GPU runs every round in parallel.
 DISCRETE_PARALLEL_ROUNDS = 4
-#: Up to this many circles a discrete step on a CPU runs on one thread, every loop of it (on
-#: this project's 2-core machine, side by side: 1.6 times the circle-steps/s of two threads at
-#: 1e3, 1.0 to 1.5 times at 1e4, even at 3e4, 0.65 to 0.85 times at 1e5).
-DISCRETE_SERIAL_N = 20_000
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
 #: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
@@ -219,7 +215,9 @@ class Simulation:
         self.wall_count = ti.ndarray(ti.i32, shape=n)
         self.virial = ti.ndarray(ti.f64, shape=n)
         self.wall_impulse = ti.ndarray(ti.f64, shape=n)
-        self.grid = Grid(n, self.box, self.periodic)
+        # Small scenes on a CPU: every per-step loop on one thread (backend.SERIAL_N).
+        self._serial = serial_loops(n)
+        self.grid = Grid(n, self.box, self.periodic, serial=self._serial)
         self._upload(np.asarray(pos, dtype=np.float64), np.asarray(vel, dtype=np.float64), np.zeros(n, np.int32),
                      np.zeros(n, np.int32), np.zeros(n), np.zeros(n))
         self._speed_out = ti.ndarray(ti.f64, shape=2)
@@ -244,7 +242,7 @@ class Simulation:
         if scheme == "discrete":
             if current_arch() == "gpu":
                 self._parallel_rounds = DISCRETE_MAX_ROUNDS
-            elif n <= DISCRETE_SERIAL_N:
+            elif self._serial:
                 self._parallel_rounds = 0  # no parallel round: the whole step on one thread
             else:
                 self._parallel_rounds = DISCRETE_PARALLEL_ROUNDS
@@ -364,7 +362,8 @@ class Simulation:
             self._scratch = (self._like(self.pos), self._like(self.radius), self._like(self.ids),
                              self._like(self.virial))
         reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
-                                 self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch)
+                                 self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch,
+                                 self._serial)
         self._ids_cache = self._color_cache = None
         self._list_large()
 
@@ -406,7 +405,7 @@ class Simulation:
         return self._discrete_step(h)
 
     def _max_speed(self):
-        vmax = reductions.max_speed(self.pos, self.vel, self._speed_out)
+        vmax = reductions.max_speed(self.pos, self.vel, self._speed_out, self._serial)
         bad = -vmax if vmax < 0 else 0
         if bad:
             raise FloatingPointError(f"{int(bad)} circles have a non-finite position or velocity at time "

@@ -44,7 +44,7 @@ def test_prefix_sum_matches_numpy(circles_cpu, chunk, group, ncells):
 @pytest.mark.parametrize("chunk,group", [(3, 2), (2048, 0)])
 @pytest.mark.parametrize("ncells", [1, 31, 20011])
 def test_prefix_sum_on_one_thread_matches_numpy(circles_cpu, chunk, group, ncells):
-    """The serial variant, which a small discrete step runs (simulation.DISCRETE_SERIAL_N)."""
+    """The serial variant, which a small discrete step runs (backend.SERIAL_N)."""
     check_prefix_sum(chunk, group, ncells, True)
 
 

@@ -13,13 +13,14 @@ def vec_array(values, dtype):
     return arr
 
 
-@pytest.mark.parametrize("threads", [0, 1, 7, 4096], ids=lambda t: f"threads{t}")
+@pytest.mark.parametrize("threads", [-1, 0, 1, 7, 4096], ids=lambda t: f"threads{t}")
 @pytest.mark.parametrize("dtype", [ti.f32, ti.f64], ids=["f32", "f64"])
 def test_max_speed_matches_numpy(circles_cpu, dtype, threads):
     """The largest speed, and minus the count of circles with a NaN or infinite number, as one
-    loop (threads = 0, the CPU's) and as strided threads (a GPU's); 5000 circles, so that
-    every thread takes several. A float64 norm of the stored values: the same to round-off."""
-    rng = np.random.default_rng(threads)
+    loop (threads = 0, the CPU's; -1 on one thread, a small scene's) and as strided threads
+    (a GPU's); 5000 circles, so that every thread takes several. A float64 norm of the stored
+    values: the same to round-off."""
+    rng = np.random.default_rng(max(threads, 0))
     pos = rng.uniform(0, 10, (5000, 2))
     vel = rng.normal(0, 1, (5000, 2))
     vel[4321] = [30.0, -40.0]  # the largest speed, 50, in a late slot
