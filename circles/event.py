@@ -410,9 +410,11 @@ def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, 
 @launch.kernel
 def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
                pos_b: ndarr, vel_b: ndarr, pair_count_b: ndarr, wall_count_b: ndarr, virial_b: ndarr,
-               wall_impulse_b: ndarr, dirty: ndarr, moved: ndarr, scalars: ndarr, real: ti.template()):
+               wall_impulse_b: ndarr, dirty: ndarr, moved: ndarr, scalars: ndarr, real: ti.template(),
+               serial: ti.template()):
     """Back up what a step changes (a cut step is redone from it), and mark every circle to predict
-    in full."""
+    in full; with `serial`, on one thread (see backend.SERIAL_N)."""
+    ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         pos_b[i] = pos[i]
         vel_b[i] = vel[i]
@@ -656,17 +658,19 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                t_offset: ti.f64, scalars: ndarr, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
                r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
-               two_level: ti.template()) -> ti.i32:
+               two_level: ti.template(), serial: ti.template()) -> ti.i32:
     """A whole step from one queue (see above). Returns the number of events executed, -1 when
     a collision would outrun the grid (scalars[1] is its time: the step is redone up to it, as
     with the rounds), or -2 when the earliest event is not its partner's (an internal error).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
-    large, and `margin` is the most two circles can close in on each other in the step."""
+    large, and `margin` is the most two circles can close in on each other in the step. With
+    `serial`, the first predictions too run on one thread (see backend.SERIAL_N)."""
     n = pos.shape[0]
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
+    ti.loop_config(serialize=serial)
     for i in range(n):
         box = ti.Vector([box_w, box_h], dt=real)
         ev_t[i], ev_p[i] = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start,
@@ -760,8 +764,10 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 
 @launch.kernel
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
-           real: ti.template(), periodic: ti.template()):
+           real: ti.template(), periodic: ti.template(), serial: ti.template()):
+    """Every circle moved to the step's end (from its own time tau); with `serial`, on one thread."""
     horizon = ti.cast(t_end, real)
+    ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         box = ti.Vector([box_w, box_h], dt=real)
         x = pos[i] + vel[i] * (horizon - tau[i])

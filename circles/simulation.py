@@ -441,7 +441,7 @@ class Simulation:
         b = self._backup
         event.begin_step(self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
                          b["pos"], b["vel"], b["pair_count"], b["wall_count"], b["virial"], b["wall_impulse"],
-                         self._dirty, self._moved, self._scalars, real)
+                         self._dirty, self._moved, self._scalars, real, self._serial)
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
         if self._event_queue:
@@ -475,7 +475,7 @@ class Simulation:
             if executed == 0:
                 raise RuntimeError(f"event rounds made no progress at step time {self._scalars.to_numpy()[0]} "
                                    "(internal error)")
-        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
+        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic, self._serial)
         return t_end
 
     def _build_two_levels(self, margin):
@@ -510,7 +510,7 @@ class Simulation:
                                         self.pair_count, self.wall_count,
                                         self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
                                         self._scalars, self._counters, self._log_t, self._log_i, self._log_j,
-                                        *levels, real, periodic, record, two)
+                                        *levels, real, periodic, record, two, self._serial)
             self.rounds += 1
             if executed == -1:
                 t_end = self._redo(log_count)
@@ -519,7 +519,7 @@ class Simulation:
                 raise RuntimeError(f"the earliest event of the queue was not its partner's at step time "
                                    f"{t_end} (internal error)")
             break
-        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic)
+        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic, self._serial)
         return t_end
 
     def _redo(self, log_count):
