@@ -135,7 +135,7 @@ def wide_row(c, dy, kx, cell_start: ti.template(), ncx, ncy):
     lo = 0
     hi = 0
     if 0 <= y < ncy:
-        row = (y + 1) * (ncx + 1) + 1
+        row = cell_index(0, y, ncx, False)
         lo = cell_start[row + ti.max(cx - kx, 0)]
         hi = cell_start[row + ti.min(cx + kx, ncx - 1) + 1]
     return lo, hi

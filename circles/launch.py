@@ -114,10 +114,10 @@ class FastKernel:
             parts.append((id(array.element_type), len(array.shape)))
         return tuple(parts)
 
-    def _through_taichi(self, args):
-        """A call through Taichi, which compiles and checks; records the compiled kernel."""
+    def _through_taichi(self, args, key):
+        """A call through Taichi, which compiles and checks; records the compiled kernel under
+        `key` (`_types_key`)."""
         result = self._kernel(*args)
-        key = self._types_key(args)
         if key is not None and key not in self._compiled:
             if len(self._compiled) >= _MAX_ENTRIES:
                 self._compiled = {}
@@ -126,9 +126,9 @@ class FastKernel:
             self._compiled[key] = (compiled, types)
         return result
 
-    def _bind(self, args):
-        """A new binding for these arguments, or None when no compiled kernel is recorded for them."""
-        key = self._types_key(args)
+    def _bind(self, args, key):
+        """A new binding for these arguments, or None when no compiled kernel is recorded under
+        their `key` (`_types_key`)."""
         entry = self._compiled.get(key) if key is not None else None
         if entry is None:
             return None
@@ -177,9 +177,10 @@ class FastKernel:
                     getattr(ctx, setter)(slot, value)
                     held[k] = value
         else:
-            found = self._bind(args)
+            types = self._types_key(args)
+            found = self._bind(args, types)
             if found is None:
-                return self._through_taichi(args)
+                return self._through_taichi(args, types)
             if len(self._bindings) >= _MAX_ENTRIES:
                 self._bindings = {}
             self._bindings[key] = found
