@@ -41,7 +41,8 @@ import taichi as ti
 
 from . import launch
 from .discrete import NLARGE
-from .geometry import NEVER, NO_EVENT, cell_coords, displacement, key_less, neighbour_range, wide_row
+from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, forward_parts, forward_range,
+                       key_less, neighbour_range, wide_row)
 
 #: Bound sweeps per launch (even: the two flag arrays swap roles each sweep).
 SWEEPS_PER_LAUNCH = 4
@@ -179,13 +180,25 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), moved: ti.template(),
               cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
-              coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template()):
-    """(time, partner) of circle i's earliest event in (tau_i, horizon], chosen by the key
+              coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
+              queue: ti.template(), code, size, changed_a, changed_b):
+    """(time, partner, size) of circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
-    Neighbours: those of one grid level, or of two (`_runs`)."""
+    Neighbours: those of one grid level, or of two (`_runs`).
+
+    With a `queue` (heap, where, heap_t, heap_lo, heap_hi of `queue_step`; else an empty
+    tuple), i is a circle whose velocity an event changed (as changed_a, and changed_b when a
+    pair's, else a value no partner has), and `moved` holds the queue's stamps. A neighbour
+    first met in this event (stamp below `code`) is stamped `code` + 1 when its event was with
+    changed_a or changed_b (it must search again: counted in `pending`), else `code`. Each pair
+    with a neighbour stamped `code` is offered to it: the neighbour takes the pair when it
+    comes before its own event, and moves up the queue. So a pair's time of impact is computed
+    once for both circles. Returns (time, partner, queue size, pending); without a queue, size
+    comes back as given."""
     n = pos.shape[0]
-    ti_ = tau[i]
+    size_now = size
+    pending = 0
     best_t = ti.cast(NEVER, real)
     best_lo = n + 8
     best_hi = n + 8
@@ -195,20 +208,8 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
         best_p = ev_p[i]
     if ti.static(not periodic):
         if full:  # the wall events of a circle that did not move stand
-            xi = pos[i]
-            vi = vel[i]
-            ri = radius[i]
-            for axis in ti.static(range(2)):
-                t = ti.cast(NEVER, real)
-                w = 0
-                if vi[axis] < 0:
-                    t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
-                    w = 2 * axis
-                elif vi[axis] > 0:
-                    t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
-                    w = 2 * axis + 1
-                if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
-                    best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
+            best_t, best_lo, best_hi, best_p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, best_t,
+                                                            best_lo, best_hi, best_p)
     c = cell_of[i]
     runs, kx, ky = _runs(i, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
     for r in range(runs):
@@ -217,20 +218,141 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
         for k in range(k_lo, k_hi):
             j = _at(k, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
             if j >= 0 and j != i and (full or moved[j] != 0):
-                t, klo, khi = _pair_key(i, j, pos, vel, radius, tau, ids, box, real, periodic)
-                if t <= horizon and key_less(t, klo, khi, best_t, best_lo, best_hi):
-                    best_t, best_lo, best_hi, best_p = t, klo, khi, j
-    return best_t, best_p
+                if ti.static(len(queue) > 0):
+                    # First met in this event's searches: a neighbour whose event was with one of
+                    # the changed circles must search again (`queue_step`); the others take offers.
+                    if moved[j] < code:
+                        jp = ev_p[j]
+                        if jp == changed_a or jp == changed_b:
+                            moved[j] = code + 1
+                            pending += 1
+                        else:
+                            moved[j] = code
+                # From the pair's lower slot, so that both circles get the time bit for bit.
+                t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, real, periodic)
+                if t <= horizon:
+                    # The key (creation ids, so that ties break the same whatever the memory
+                    # order), read only for the few pairs within the horizon.
+                    klo = ti.min(ids[i], ids[j])
+                    khi = ti.max(ids[i], ids[j])
+                    if key_less(t, klo, khi, best_t, best_lo, best_hi):
+                        best_t, best_lo, best_hi, best_p = t, klo, khi, j
+                    if ti.static(len(queue) > 0):
+                        if moved[j] == code:
+                            if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
+                                size_now = _heap_fix(j, size_now, queue[0], queue[1], queue[2], queue[3], queue[4],
+                                                     ev_t, ev_p, ids, n)
+    return best_t, best_p, size_now, pending
 
 
 @ti.func
-def _pair_key(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
-              ids: ti.template(), box, real: ti.template(), periodic: ti.template()):
-    """(time of impact, lo, hi) of the pair (i, j): computed from its lower slot, so that both
-    circles get it bit for bit; keys use creation ids, so ties break the same whatever the
-    memory order."""
+def _wall_events(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                 ids: ti.template(), box, horizon, real: ti.template(), best_t, best_lo, best_hi, best_p):
+    """The best (key, partner) so far, (best_t, best_lo, best_hi, best_p), updated with circle
+    i's wall hits in (tau_i, horizon] (a walled box)."""
+    n = pos.shape[0]
+    ti_ = tau[i]
+    xi = pos[i]
+    vi = vel[i]
+    ri = radius[i]
+    for axis in ti.static(range(2)):
+        t = ti.cast(NEVER, real)
+        w = 0
+        if vi[axis] < 0:
+            t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
+            w = 2 * axis
+        elif vi[axis] > 0:
+            t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
+            w = 2 * axis + 1
+        if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
+            best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
+    return best_t, best_lo, best_hi, best_p
+
+
+@ti.func
+def _offer(j, i, t, klo, khi, ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """Circle j takes the pair with i, of key (t, klo, khi), as its event when the pair comes
+    before its stored one; returns whether it did."""
+    jt, jlo, jhi = event_key(j, ev_t, ev_p, ids, n)
+    taken = key_less(t, klo, khi, jt, jlo, jhi)
+    if taken:
+        ev_t[j] = t
+        ev_p[j] = i
+    return taken
+
+
+@ti.func
+def _pair_once(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+               ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), box, horizon, real: ti.template(),
+               periodic: ti.template()):
+    """The pair (i, j) offered to both circles (`_offer`) when it meets within the horizon."""
+    n = pos.shape[0]
     t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, real, periodic)
-    return t, ti.min(ids[i], ids[j]), ti.max(ids[i], ids[j])
+    if t <= horizon:
+        klo = ti.min(ids[i], ids[j])
+        khi = ti.max(ids[i], ids[j])
+        _offer(i, j, t, klo, khi, ev_t, ev_p, ids, n)
+        _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n)
+
+
+@ti.func
+def _offer_forward(own, forward, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                   ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), cell_of: ti.template(),
+                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box, horizon,
+                   real: ti.template(), periodic: ti.template()):
+    """The pairs of the circle in slot `own` with the forward half of its cells
+    (`geometry.forward_range`; on a periodic grid under 3 cells wide, `forward` is False: the
+    full search, each pair from its lower index), offered to both circles (`_pair_once`)."""
+    i = sorted_ids[own]
+    c = cell_of[i]
+    if forward:
+        cy = c // ncx  # cell coordinates of a periodic grid (a walled one does not read them)
+        cx = c - cy * ncx
+        for q in ti.static(range(forward_parts(periodic))):
+            k_lo, k_hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                _pair_once(i, sorted_ids[k], pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
+    else:
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if j > i:
+                    _pair_once(i, j, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
+
+
+@ti.func
+def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                       ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), cell_of: ti.template(),
+                       cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+                       horizon, real: ti.template(), periodic: ti.template()):
+    """On one thread, every circle's earliest event, as `_earliest` in full would find it, with
+    each pair's time of impact computed once, not once from each circle: every circle takes
+    its walls, then each pair is offered to both circles from the forward half of one circle's
+    cells (`_offer_forward`). The minimum of the keys does not depend on the order of the
+    offers. One grid level.
+
+    (On several threads the offers of two threads could meet at one circle; there each circle
+    searches all its cells, `queue_step`. Threads that take bands of rows of cells, even bands
+    then odd ones, need no atomics, but measured no faster on 2 cores at 1e5 and 1e6.)"""
+    n = pos.shape[0]
+    ti.loop_config(serialize=True)
+    for i in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
+        t = ti.cast(NEVER, real)
+        lo = n + 8
+        hi = n + 8
+        p = NO_EVENT
+        if ti.static(not periodic):
+            t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t, lo, hi, p)
+        ev_t[i] = t
+        ev_p[i] = p
+    forward = forward_fits(ncx, ncy, periodic)
+    ti.loop_config(serialize=True)
+    for own in range(n):
+        box = ti.Vector([box_w, box_h], dt=real)
+        _offer_forward(own, forward, pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx,
+                       ncy, rows, segs, box, horizon, real, periodic)
 
 
 @ti.func
@@ -271,9 +393,12 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             dirty[i] = 0
             old_p = ev_p[i]
             full = moved[i] != 0 or (old_p >= 0 and moved[old_p] != 0)
-            ev_t[i], ev_p[i] = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of, cell_start,
-                                         sorted_ids, ncx, ncy, rows, segs, box, horizon, real, periodic,
-                                         cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False)
+            t_i, p_i, unused, unused2 = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of,
+                                                  cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
+                                                  periodic, cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False, (),
+                                                  0, 0, 0, 0)
+            ev_t[i] = t_i
+            ev_p[i] = p_i
     for i in range(n):
         moved[i] = 0
     for i in range(n):
@@ -563,59 +688,65 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 # arithmetic of each are those of the rounds (independent events touch disjoint circles and
 # commute bit for bit), so the state is the same bit for bit; what goes is the rounds' cost:
 # the bound sweeps, and every round's passes over all circles. A GPU runs the rounds.
+#
+# After an event only pairs with its circles changed. Their own searches compute each of those
+# pairs once and offer it to the neighbour (`_earliest` with a queue); only a neighbour whose
+# event was with one of them searches again in full.
 
 
 @ti.func
-def _heap_less(k, m, heap_t: ti.template(), heap_lo: ti.template(), heap_hi: ti.template()):
-    """Whether the event in queue slot k comes before the one in slot m (by key)."""
-    return key_less(heap_t[k], heap_lo[k], heap_hi[k], heap_t[m], heap_lo[m], heap_hi[m])
-
-
-@ti.func
-def _heap_swap(k, m, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-               heap_hi: ti.template()):
-    a = heap[k]
-    b = heap[m]
-    heap[k] = b
-    heap[m] = a
-    where[b] = k
-    where[a] = m
-    t = heap_t[k]
-    heap_t[k] = heap_t[m]
-    heap_t[m] = t
-    lo = heap_lo[k]
-    heap_lo[k] = heap_lo[m]
-    heap_lo[m] = lo
-    hi = heap_hi[k]
-    heap_hi[k] = heap_hi[m]
-    heap_hi[m] = hi
+def _heap_put(k, x, t, lo, hi, heap: ti.template(), where: ti.template(), heap_t: ti.template(),
+              heap_lo: ti.template(), heap_hi: ti.template()):
+    """Circle x, with its event's key (t, lo, hi), into queue slot k."""
+    heap[k] = x
+    where[x] = k
+    heap_t[k] = t
+    heap_lo[k] = lo
+    heap_hi[k] = hi
 
 
 @ti.func
 def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
              heap_hi: ti.template()):
+    """Move the event in slot k up to its place; returns its new slot. The parents it passes
+    move down one level each, and it is written once, at its place (a hole moves up, not a
+    swapped pair: half the stores)."""
+    x = heap[k]
+    t = heap_t[k]
+    lo = heap_lo[k]
+    hi = heap_hi[k]
     while k > 0:
         parent = (k - 1) // 2
-        if _heap_less(k, parent, heap_t, heap_lo, heap_hi):
-            _heap_swap(k, parent, heap, where, heap_t, heap_lo, heap_hi)
+        if key_less(t, lo, hi, heap_t[parent], heap_lo[parent], heap_hi[parent]):
+            _heap_put(k, heap[parent], heap_t[parent], heap_lo[parent], heap_hi[parent], heap, where, heap_t,
+                      heap_lo, heap_hi)
             k = parent
         else:
             break
+    _heap_put(k, x, t, lo, hi, heap, where, heap_t, heap_lo, heap_hi)
     return k
 
 
 @ti.func
 def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
                heap_hi: ti.template()):
+    """Move the event in slot k down to its place, the earlier of its two children moving up
+    each level (the hole of `_sift_up`, downwards)."""
+    x = heap[k]
+    t = heap_t[k]
+    lo = heap_lo[k]
+    hi = heap_hi[k]
     while 2 * k + 1 < size:
         m = 2 * k + 1
-        if m + 1 < size and _heap_less(m + 1, m, heap_t, heap_lo, heap_hi):
+        if m + 1 < size and key_less(heap_t[m + 1], heap_lo[m + 1], heap_hi[m + 1], heap_t[m], heap_lo[m],
+                                     heap_hi[m]):
             m += 1
-        if _heap_less(m, k, heap_t, heap_lo, heap_hi):
-            _heap_swap(k, m, heap, where, heap_t, heap_lo, heap_hi)
+        if key_less(heap_t[m], heap_lo[m], heap_hi[m], t, lo, hi):
+            _heap_put(k, heap[m], heap_t[m], heap_lo[m], heap_hi[m], heap, where, heap_t, heap_lo, heap_hi)
             k = m
         else:
             break
+    _heap_put(k, x, t, lo, hi, heap, where, heap_t, heap_lo, heap_hi)
 
 
 @ti.func
@@ -666,19 +797,30 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
     large, and `margin` is the most two circles can close in on each other in the step. With
-    `serial`, the first predictions too run on one thread (see backend.SERIAL_N)."""
+    `serial`, the first predictions too run on one thread (see backend.SERIAL_N), each pair's
+    time computed once (`_first_events_once`, one grid level)."""
     n = pos.shape[0]
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
+    if ti.static(serial and not two_level):
+        _first_events_once(pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+                           segs, box_w, box_h, horizon, real, periodic)
+    else:
+        ti.loop_config(serialize=serial)
+        for i in range(n):
+            box = ti.Vector([box_w, box_h], dt=real)
+            t_i, p_i, unused, unused2 = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of,
+                                                  cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
+                                                  periodic, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
+                                                  margin, two_level, (), 0, 0, 0, 0)
+            ev_t[i] = t_i
+            ev_p[i] = p_i
     ti.loop_config(serialize=serial)
     for i in range(n):
-        box = ti.Vector([box_w, box_h], dt=real)
-        ev_t[i], ev_p[i] = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start,
-                                     sorted_ids, ncx, ncy, rows, segs, box, horizon, real, periodic, coarse_start,
-                                     coarse_ids, ncx_c, ncy_c, mx, my, r_cut, margin, two_level)
         where[i] = -1
         stamp[i] = 0
     result = 0
+    queue = ti.static((heap, where, heap_t, heap_lo, heap_hi))
     ti.loop_config(serialize=True)
     for _ in range(1):
         box = ti.Vector([box_w, box_h], dt=real)
@@ -720,9 +862,31 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                     if ti.static(record):
                         _log(e, ids[c], p, t_offset, counters, log_t, log_i, log_j)
             executed += 1
-            # Only pairs with c (and p) changed: a neighbour whose event was with one of them
-            # searches again in full, any other compares its event with its pairs with them.
+            # Only pairs with c (and p) changed. Stamps of this event: `base` for a neighbour
+            # that keeps its event unless a pair with c or p comes first, base + 1 for one whose
+            # event was with c or p (it searches again in full), base + 2 once done (c and p).
+            base = 3 * executed
+            stamp[c] = base + 2
+            other = -(1 << 30)  # no partner is this
+            if changed == 2:
+                stamp[p] = base + 2
+                other = p
+            # c's and p's searches, which stamp their neighbours and offer each pair to them.
+            pending = 0
             for q in range(changed):
+                y = c
+                if q == 1:
+                    y = p
+                ev_t[y], ev_p[y], size, more = _earliest(y, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp,
+                                                         cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box,
+                                                         horizon, real, periodic, coarse_start, coarse_ids, ncx_c,
+                                                         ncy_c, mx, my, r_cut, margin, two_level, queue, base, size,
+                                                         c, other)
+                pending += more
+                size = _heap_fix(y, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
+            # The neighbours whose event was with c or p (after few events: most neighbours'
+            # events are with others).
+            for q in range(changed if pending > 0 else 0):
                 y = c
                 if q == 1:
                     y = p
@@ -733,30 +897,16 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                               ncy_c, mx, my, periodic, two_level)
                     for kk in range(k_lo, k_hi):
                         x = _at(kk, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
-                        if x >= 0 and stamp[x] != executed:
-                            stamp[x] = executed
-                            xp = ev_p[x]
-                            fix = True
-                            if x == c or (changed == 2 and x == p) or xp == c or (changed == 2 and xp == p):
-                                ev_t[x], ev_p[x] = _earliest(x, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp,
-                                                             cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
-                                                             box, horizon, real, periodic, coarse_start, coarse_ids,
-                                                             ncx_c, ncy_c, mx, my, r_cut, margin, two_level)
-                            else:
-                                bt, blo, bhi = event_key(x, ev_t, ev_p, ids, n)
-                                bp = xp
-                                for r in range(changed):
-                                    z = c
-                                    if r == 1:
-                                        z = p
-                                    t, klo, khi = _pair_key(x, z, pos, vel, radius, tau, ids, box, real, periodic)
-                                    if t <= horizon and key_less(t, klo, khi, bt, blo, bhi):
-                                        bt, blo, bhi, bp = t, klo, khi, z
-                                fix = bp != xp or bt != ev_t[x]
-                                ev_t[x] = bt
-                                ev_p[x] = bp
-                            if fix:
-                                size = _heap_fix(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
+                        if x >= 0 and stamp[x] == base + 1:
+                            stamp[x] = base + 2
+                            t_x, p_x, unused, unused2 = _earliest(x, True, pos, vel, radius, tau, ids, ev_t, ev_p,
+                                                                  stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
+                                                                  rows, segs, box, horizon, real, periodic,
+                                                                  coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
+                                                                  r_cut, margin, two_level, (), 0, 0, 0, 0)
+                            ev_t[x] = t_x
+                            ev_p[x] = p_x
+                            size = _heap_fix(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
         if result == 0:
             result = executed
     return result
