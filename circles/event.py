@@ -181,21 +181,22 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
               coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
-              queue: ti.template(), code, size, changed_a, changed_b):
+              queue: ti.template(), code, size, changed_a, changed_b, pend_at):
     """(time, partner, size) of circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
     Neighbours: those of one grid level, or of two (`_runs`).
 
-    With a `queue` (heap, where, heap_t, heap_lo, heap_hi of `queue_step`; else an empty
-    tuple), i is a circle whose velocity an event changed (as changed_a, and changed_b when a
-    pair's, else a value no partner has), and `moved` holds the queue's stamps. A neighbour
-    first met in this event (stamp below `code`) is stamped `code` + 1 when its event was with
-    changed_a or changed_b (it must search again: counted in `pending`), else `code`. Each pair
-    with a neighbour stamped `code` is offered to it: the neighbour takes the pair when it
-    comes before its own event, and moves up the queue. So a pair's time of impact is computed
-    once for both circles. Returns (time, partner, queue size, pending); without a queue, size
-    comes back as given."""
+    With a `queue` (heap, where, heap_t, heap_lo, heap_hi and pending of `queue_step`; else an
+    empty tuple), `moved` holds the queue's stamps, and with `code` >= 0 i is a circle whose
+    velocity an event changed (as changed_a, and changed_b when a pair's, else a value no
+    partner has). A neighbour first met in this event (stamp below `code`) is stamped `code` + 1
+    when its event was with changed_a or changed_b (it must search again: listed in pending
+    from `pend_at` on, and counted), else `code`. Each pair with a neighbour stamped `code` is
+    offered to it: the neighbour takes the pair when it comes before its own event, and moves
+    up the queue. So a pair's time of impact is computed once for both circles. With `code`
+    < 0 nothing is stamped or offered. Returns (time, partner, queue size, neighbours listed);
+    without a queue, size comes back as given."""
     n = pos.shape[0]
     size_now = size
     pending = 0
@@ -225,6 +226,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                         jp = ev_p[j]
                         if jp == changed_a or jp == changed_b:
                             moved[j] = code + 1
+                            queue[5][pend_at + pending] = j
                             pending += 1
                         else:
                             moved[j] = code
@@ -240,8 +242,8 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                     if ti.static(len(queue) > 0):
                         if moved[j] == code:
                             if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
-                                size_now = _heap_fix(j, size_now, queue[0], queue[1], queue[2], queue[3], queue[4],
-                                                     ev_t, ev_p, ids, n)
+                                size_now = _heap_earlier(j, size_now, queue[0], queue[1], queue[2], queue[3],
+                                                         queue[4], ev_t, ev_p, ids, n)
     return best_t, best_p, size_now, pending
 
 
@@ -396,7 +398,7 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             t_i, p_i, unused, unused2 = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False, (),
-                                                  0, 0, 0, 0)
+                                                  0, 0, 0, 0, 0)
             ev_t[i] = t_i
             ev_p[i] = p_i
     for i in range(n):
@@ -756,6 +758,7 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
     an event once, with its key: in it when it has an event, out of it when not. Returns the
     new size."""
     k = where[x]
+    moved = False  # whether slot k holds an event that must move up or down to its place
     if ev_p[x] != NO_EVENT:
         if k < 0:
             k = size
@@ -763,8 +766,7 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
             where[x] = k
             size += 1
         heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
-        k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
-        _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+        moved = True
     elif k >= 0:
         size -= 1
         where[x] = -1
@@ -775,15 +777,32 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
             heap_t[k] = heap_t[size]
             heap_lo[k] = heap_lo[size]
             heap_hi[k] = heap_hi[size]
-            k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
-            _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+            moved = True
+    if moved:
+        k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
+        _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+    return size
+
+
+@ti.func
+def _heap_earlier(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+                  heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """`_heap_fix` for an event that came earlier (or a circle that had none): it can only move up."""
+    k = where[x]
+    if k < 0:
+        k = size
+        heap[k] = x
+        where[x] = k
+        size += 1
+    heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
+    _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
     return size
 
 
 @launch.kernel
 def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
                ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, heap_lo: ndarr,
-               heap_hi: ndarr, pair_count: ndarr, wall_count: ndarr,
+               heap_hi: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
                virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                t_offset: ti.f64, scalars: ndarr, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
@@ -812,7 +831,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
             t_i, p_i, unused, unused2 = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                                                  margin, two_level, (), 0, 0, 0, 0)
+                                                  margin, two_level, (), 0, 0, 0, 0, 0)
             ev_t[i] = t_i
             ev_p[i] = p_i
     ti.loop_config(serialize=serial)
@@ -820,7 +839,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         where[i] = -1
         stamp[i] = 0
     result = 0
-    queue = ti.static((heap, where, heap_t, heap_lo, heap_hi))
+    queue = ti.static((heap, where, heap_t, heap_lo, heap_hi, pending))
     ti.loop_config(serialize=True)
     for _ in range(1):
         box = ti.Vector([box_w, box_h], dt=real)
@@ -863,50 +882,34 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                         _log(e, ids[c], p, t_offset, counters, log_t, log_i, log_j)
             executed += 1
             # Only pairs with c (and p) changed. Stamps of this event: `base` for a neighbour
-            # that keeps its event unless a pair with c or p comes first, base + 1 for one whose
-            # event was with c or p (it searches again in full), base + 2 once done (c and p).
-            base = 3 * executed
-            stamp[c] = base + 2
+            # that keeps its event unless a pair with c or p comes first, base + 1 for c and p and
+            # for a neighbour whose event was with c or p (it searches again in full).
+            base = 2 * executed
+            stamp[c] = base + 1
             other = -(1 << 30)  # no partner is this
             if changed == 2:
-                stamp[p] = base + 2
+                stamp[p] = base + 1
                 other = p
-            # c's and p's searches, which stamp their neighbours and offer each pair to them.
-            pending = 0
-            for q in range(changed):
+            # The searches of c, p, then of the neighbours listed as having had their event with
+            # c or p; c's and p's stamp their neighbours and offer each pair to them.
+            subjects = changed
+            m = 0
+            while m < subjects:
                 y = c
-                if q == 1:
+                code = base
+                if m == 1 and changed == 2:
                     y = p
+                elif m >= changed:
+                    y = pending[m - changed]
+                    code = -1  # a full search, as c's and p's, without offers
                 ev_t[y], ev_p[y], size, more = _earliest(y, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp,
                                                          cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box,
                                                          horizon, real, periodic, coarse_start, coarse_ids, ncx_c,
-                                                         ncy_c, mx, my, r_cut, margin, two_level, queue, base, size,
-                                                         c, other)
-                pending += more
+                                                         ncy_c, mx, my, r_cut, margin, two_level, queue, code, size,
+                                                         c, other, subjects - changed)
+                subjects += more
                 size = _heap_fix(y, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
-            # The neighbours whose event was with c or p (after few events: most neighbours'
-            # events are with others).
-            for q in range(changed if pending > 0 else 0):
-                y = c
-                if q == 1:
-                    y = p
-                cell_y = cell_of[y]
-                runs, kx, ky = _runs(y, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
-                for run in range(runs):
-                    k_lo, k_hi, coarse = _run(run, cell_y, kx, ky, cell_start, coarse_start, ncx, ncy, segs, ncx_c,
-                                              ncy_c, mx, my, periodic, two_level)
-                    for kk in range(k_lo, k_hi):
-                        x = _at(kk, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
-                        if x >= 0 and stamp[x] == base + 1:
-                            stamp[x] = base + 2
-                            t_x, p_x, unused, unused2 = _earliest(x, True, pos, vel, radius, tau, ids, ev_t, ev_p,
-                                                                  stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
-                                                                  rows, segs, box, horizon, real, periodic,
-                                                                  coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
-                                                                  r_cut, margin, two_level, (), 0, 0, 0, 0)
-                            ev_t[x] = t_x
-                            ev_p[x] = p_x
-                            size = _heap_fix(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
+                m += 1
         if result == 0:
             result = executed
     return result

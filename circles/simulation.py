@@ -294,6 +294,8 @@ class Simulation:
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
         self._heap_hi = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
+        # The queue's list of neighbours that search again after an event (`event.queue_step`).
+        self._pending = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         self._backup = {name: self._like(getattr(self, name))
                         for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
 
@@ -507,7 +509,7 @@ class Simulation:
             # The rounds' arrays (bounds, flags) hold the queue: circles, places, keys.
             executed = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
                                         self._ev_p, self._dirty, *self._active, self._d1, self._moved, self._heap_hi,
-                                        self.pair_count, self.wall_count,
+                                        self._pending, self.pair_count, self.wall_count,
                                         self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
                                         self._scalars, self._counters, self._log_t, self._log_i, self._log_j,
                                         *levels, real, periodic, record, two, self._serial)
