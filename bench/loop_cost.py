@@ -1,0 +1,130 @@
+"""What a plain loop costs in Taichi's CPU code, against numpy: the floor under a step's passes.
+
+    python bench/loop_cost.py [--mb 128] [--reps 7]
+
+Copies of a float32 array larger than the cache (the best of `reps` runs, bytes read plus
+written per second): a Taichi loop on all threads and on one thread, the one-thread loop
+unrolled by 16 with its 16 loads before its 16 stores, a read-only Taichi loop (a sum), and
+numpy's copy. Then the grid count of a discrete step alone (1e6 circles in cell order: the
+cell of each, counted into its cell with an atomic add) against the same pass that only
+writes the cell.
+
+Taichi's generated loop reads each array's data pointer from the kernel's argument buffer
+at every access; after a store, which might alias that buffer, it reads it again, so every
+store-then-load pair waits on memory order. A loop with no store keeps the pointers in
+registers (the read-only row). See the README's known limits.
+"""
+import argparse
+import time
+
+import numpy as np
+import taichi as ti
+
+nd = ti.types.ndarray(ndim=1)
+
+
+@ti.kernel
+def copy_parallel(src: nd, dst: nd):
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def copy_serial(src: nd, dst: nd):
+    ti.loop_config(serialize=True)
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def copy_serial_grouped(src: nd, dst: nd):
+    ti.loop_config(serialize=True)
+    for g in range(src.shape[0] // 16):
+        v = ti.Vector([0.0] * 16, dt=ti.f32)
+        for u in ti.static(range(16)):
+            v[u] = src[g * 16 + u]
+        for u in ti.static(range(16)):
+            dst[g * 16 + u] = v[u]
+
+
+@ti.kernel
+def read_sum(src: nd) -> ti.f32:
+    total = ti.cast(0.0, ti.f32)
+    for i in range(src.shape[0]):
+        total += src[i]
+    return total
+
+
+@ti.kernel
+def cell_only(pos: ti.types.ndarray(ndim=1), cell_of: nd, ncx: ti.i32, ncy: ti.i32):
+    for i in range(pos.shape[0]):
+        cx = ti.min(ti.cast(pos[i][0] * ncx, ti.i32), ncx - 1)
+        cy = ti.min(ti.cast(pos[i][1] * ncy, ti.i32), ncy - 1)
+        cell_of[i] = cy * ncx + cx
+
+
+@ti.kernel
+def cell_and_count(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: nd, ncx: ti.i32, ncy: ti.i32):
+    for i in range(pos.shape[0]):
+        cx = ti.min(ti.cast(pos[i][0] * ncx, ti.i32), ncx - 1)
+        cy = ti.min(ti.cast(pos[i][1] * ncy, ti.i32), ncy - 1)
+        c = cy * ncx + cx
+        cell_of[i] = c
+        slot[i] = ti.atomic_add(count[c], 1)
+
+
+def best_of(reps, fn, before=None):
+    times = []
+    for _ in range(reps + 1):  # the first call compiles
+        if before is not None:
+            before()
+        ti.sync()
+        t0 = time.perf_counter()
+        fn()
+        ti.sync()
+        times.append(time.perf_counter() - t0)
+    return min(times[1:])
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mb", type=float, default=128, help="size of the copied array")
+    parser.add_argument("--reps", type=int, default=7)
+    args = parser.parse_args()
+    ti.init(arch=ti.cpu)
+    n = int(args.mb * 2**20 / 4)
+    host = np.random.default_rng(0).random(n, dtype=np.float32)
+    src = ti.ndarray(ti.f32, n)
+    dst = ti.ndarray(ti.f32, n)
+    src.from_numpy(host)
+    out = np.empty_like(host)
+    moved = 8.0 * n / 1e9
+    print(f"float32 copy of {args.mb:g} MB, best of {args.reps}, GB/s read plus written")
+    rows = [("taichi loop, all threads", lambda: copy_parallel(src, dst), moved),
+            ("taichi loop, one thread", lambda: copy_serial(src, dst), moved),
+            ("taichi loop, one thread, 16 loads then 16 stores", lambda: copy_serial_grouped(src, dst), moved),
+            ("taichi read-only loop (sum), all threads", lambda: read_sum(src), moved / 2),
+            ("numpy copyto, one thread", lambda: np.copyto(out, host), moved)]
+    for name, fn, gb in rows:
+        print(f"  {name:50s} {gb / best_of(args.reps, fn):6.2f}")
+
+    circles = 1_000_000
+    ncx, ncy = 2160, 1212  # about 2.6 cells per circle, as a discrete step's grid at area fraction 0.3
+    rng = np.random.default_rng(1)
+    p = rng.random((circles, 2), dtype=np.float32)
+    p = p[np.lexsort((p[:, 0], np.floor(p[:, 1] * ncy)))]  # cell order, as after a reorder
+    pos = ti.Vector.ndarray(2, ti.f32, circles)
+    pos.from_numpy(p)
+    cell_of = ti.ndarray(ti.i32, circles)
+    slot = ti.ndarray(ti.i32, circles)
+    count = ti.ndarray(ti.i32, ncx * ncy)
+    only = best_of(args.reps, lambda: cell_only(pos, cell_of, ncx, ncy))
+    counted = best_of(args.reps, lambda: cell_and_count(pos, cell_of, slot, count, ncx, ncy),
+                      before=lambda: count.fill(0))
+    print(f"grid pass over {circles} circles in cell order, all threads, best of {args.reps}:")
+    print(f"  cell of each circle only      {only * 1e3:6.2f} ms")
+    print(f"  and counted into its cell     {counted * 1e3:6.2f} ms")
+
+
+if __name__ == "__main__":
+    main()
