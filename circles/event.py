@@ -182,7 +182,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
               coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
               queue: ti.template(), code, size, changed_a, changed_b, pend_at):
-    """(time, partner, size) of circle i's earliest event in (tau_i, horizon], chosen by the key
+    """Circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
     Neighbours: those of one grid level, or of two (`_runs`).
@@ -196,7 +196,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
     offered to it: the neighbour takes the pair when it comes before its own event, and moves
     up the queue. So a pair's time of impact is computed once for both circles. With `code`
     < 0 nothing is stamped or offered. Returns (time, partner, queue size, neighbours listed);
-    without a queue, size comes back as given."""
+    without a queue, size comes back as given and none are listed."""
     n = pos.shape[0]
     size_now = size
     pending = 0
@@ -752,6 +752,21 @@ def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.te
 
 
 @ti.func
+def _heap_keyed(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
+                heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """(slot, size): circle x's slot in the queue, appended at the end when it had none, with its
+    event's key written there (the slot is not yet in heap order)."""
+    k = where[x]
+    if k < 0:
+        k = size
+        heap[k] = x
+        where[x] = k
+        size += 1
+    heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
+    return k, size
+
+
+@ti.func
 def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
               heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
     """Put circle x where its (changed) event belongs in the queue, which holds each circle with
@@ -760,12 +775,7 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
     k = where[x]
     moved = False  # whether slot k holds an event that must move up or down to its place
     if ev_p[x] != NO_EVENT:
-        if k < 0:
-            k = size
-            heap[k] = x
-            where[x] = k
-            size += 1
-        heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
+        k, size = _heap_keyed(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
         moved = True
     elif k >= 0:
         size -= 1
@@ -788,13 +798,7 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
 def _heap_earlier(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
                   heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
     """`_heap_fix` for an event that came earlier (or a circle that had none): it can only move up."""
-    k = where[x]
-    if k < 0:
-        k = size
-        heap[k] = x
-        where[x] = k
-        size += 1
-    heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
+    k, size = _heap_keyed(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
     _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
     return size
 
