@@ -28,7 +28,7 @@ collisions can be missed or counted twice.
 import taichi as ti
 
 from . import launch
-from .geometry import NEVER, displacement, forward_fits, forward_parts, forward_range, neighbour_range, wide_row
+from .geometry import NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, wide_row
 from .grid import enter_cell, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -186,6 +186,13 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
 
 
 @ti.func
+def _contact_of(i, j, a: ti.template()):
+    """`_record_contact` of the pair (i, j) as `geometry.pairs_once` visits it; `a` holds the
+    other arguments."""
+    _record_contact(i, j, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10])
+
+
+@ti.func
 def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
                    n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
                    cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
@@ -223,23 +230,9 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                 if not is_large(j, radius, spread, two_level):
                     _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
                                     periodic)
-        elif forward:
-            cy = c // ncx
-            cx = c - cy * ncx
-            for q in ti.static(range(forward_parts(periodic))):
-                k_lo, k_hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
-                for k in range(k_lo, k_hi):
-                    _record_contact(i, sorted_ids[k], pos, vel, radius, contacts, n_contacts, marked, lists, work,
-                                    rnd, box, periodic)
         else:
-            # A periodic grid under 3 cells wide: the full search, each pair from its lower index.
-            for row, seg in ti.ndrange(rows, segs):
-                k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j > i:
-                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
-                                        periodic)
+            pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
+                       (pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box, periodic))
     if ti.static(two_level):
         ti.loop_config(serialize=serial)
         for a in range(work[NLARGE]):

@@ -41,8 +41,8 @@ import taichi as ti
 
 from . import launch
 from .discrete import NLARGE
-from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, forward_parts, forward_range,
-                       key_less, neighbour_range, wide_row)
+from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
+                       pairs_once, wide_row)
 
 #: Bound sweeps per launch (even: the two flag arrays swap roles each sweep).
 SWEEPS_PER_LAUNCH = 4
@@ -284,43 +284,17 @@ def _offer(j, i, t, klo, khi, ev_t: ti.template(), ev_p: ti.template(), ids: ti.
 
 
 @ti.func
-def _pair_once(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
-               ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), box, horizon, real: ti.template(),
-               periodic: ti.template()):
-    """The pair (i, j) offered to both circles (`_offer`) when it meets within the horizon."""
-    n = pos.shape[0]
-    t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, real, periodic)
-    if t <= horizon:
-        klo = ti.min(ids[i], ids[j])
-        khi = ti.max(ids[i], ids[j])
-        _offer(i, j, t, klo, khi, ev_t, ev_p, ids, n)
-        _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n)
-
-
-@ti.func
-def _offer_forward(own, forward, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
-                   ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), cell_of: ti.template(),
-                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box, horizon,
-                   real: ti.template(), periodic: ti.template()):
-    """The pairs of the circle in slot `own` with the forward half of its cells
-    (`geometry.forward_range`; on a periodic grid under 3 cells wide, `forward` is False: the
-    full search, each pair from its lower index), offered to both circles (`_pair_once`)."""
-    i = sorted_ids[own]
-    c = cell_of[i]
-    if forward:
-        cy = c // ncx  # cell coordinates of a periodic grid (a walled one does not read them)
-        cx = c - cy * ncx
-        for q in ti.static(range(forward_parts(periodic))):
-            k_lo, k_hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
-            for k in range(k_lo, k_hi):
-                _pair_once(i, sorted_ids[k], pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
-    else:
-        for row, seg in ti.ndrange(rows, segs):
-            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
-            for k in range(k_lo, k_hi):
-                j = sorted_ids[k]
-                if j > i:
-                    _pair_once(i, j, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
+def _pair_once(i, j, a: ti.template()):
+    """The pair (i, j) offered to both circles (`_offer`) when it meets within the horizon, as
+    `geometry.pairs_once` visits it; `a` holds (pos, vel, radius, tau, ids, ev_t, ev_p, box,
+    horizon, real, periodic)."""
+    n = a[0].shape[0]
+    t = pair_time_of_impact(a[0], a[1], a[2], a[3], ti.min(i, j), ti.max(i, j), a[7], a[9], a[10])
+    if t <= a[8]:
+        klo = ti.min(a[4][i], a[4][j])
+        khi = ti.max(a[4][i], a[4][j])
+        _offer(i, j, t, klo, khi, a[5], a[6], a[4], n)
+        _offer(j, i, t, klo, khi, a[5], a[6], a[4], n)
 
 
 @ti.func
@@ -331,7 +305,7 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
     """On one thread, every circle's earliest event, as `_earliest` in full would find it, with
     each pair's time of impact computed once, not once from each circle: every circle takes
     its walls, then each pair is offered to both circles from the forward half of one circle's
-    cells (`_offer_forward`). The minimum of the keys does not depend on the order of the
+    cells (`geometry.pairs_once`). The minimum of the keys does not depend on the order of the
     offers. One grid level.
 
     (On several threads the offers of two threads could meet at one circle; there each circle
@@ -353,8 +327,9 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
     ti.loop_config(serialize=True)
     for own in range(n):
         box = ti.Vector([box_w, box_h], dt=real)
-        _offer_forward(own, forward, pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx,
-                       ncy, rows, segs, box, horizon, real, periodic)
+        i = sorted_ids[own]
+        pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _pair_once,
+                   (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic))
 
 
 @ti.func

@@ -171,6 +171,29 @@ def forward_range(q, c, cx, cy, own, cell_start: ti.template(), ncx, ncy, period
     return lo, hi
 
 
+@ti.func
+def pairs_once(own, i, c, forward, cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
+               periodic: ti.template(), visit: ti.template(), args: ti.template()):
+    """visit(i, j, args) for each circle j whose pair with circle i (in slot `own` of cell c) is
+    met from i's side: the forward half of i's cells (`forward_range`), or, where `forward` is
+    False (`forward_fits`: a periodic grid under 3 cells wide), the full 3 x 3 search with each
+    pair from its lower index. Over every circle, each neighbouring pair is visited once."""
+    if forward:
+        cy = c // ncx  # cell coordinates of a periodic grid (a walled one does not read them)
+        cx = c - cy * ncx
+        for q in ti.static(range(forward_parts(periodic))):
+            k_lo, k_hi = forward_range(q, c, cx, cy, own, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                visit(i, sorted_ids[k], args)
+    else:
+        for row, seg in ti.ndrange(rows, segs):
+            k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if j > i:
+                    visit(i, j, args)
+
+
 def forward_parts(periodic: bool) -> int:
     """The number of parts of `forward_range`."""
     return 4 if periodic else 2
