@@ -26,7 +26,10 @@ What is measured, all in one run and one process:
    both schemes (grid arrays, neighbour reads, the event scheme's clocks and backups are
    left out, so the bound is optimistic). Bound = B / bytes per circle-step.
 3. Peer. pymunk (see peer_pymunk.py) on the same scene, from the same start state, with
-   the discrete scheme's default dt; ratios circles / pymunk at equal N.
+   the discrete scheme's default dt, side by side with circles at the same N in each scheme
+   and precision of the throughput rows: every repeat times each engine in turn, so that the
+   drift of a shared machine falls on all alike; ratios circles / pymunk of the medians, with
+   the least and greatest ratio within one repeat.
 4. Work-precision. N circles at area fractions 0.3 and 0.6 in a periodic square box, from
    one start state; reference: event scheme, f64, default dt. For dt from 0.01 to 2 mean free
    times (measured from the reference), `discrete` and `event` (f64) run the same simulated
@@ -404,31 +407,59 @@ def start_state(n, fraction, aspect, boundary, seed=0):
     return s.pos, s.vel, s.radius, s.mass, box
 
 
-def measure_pymunk(n, reps, target, dt):
+def measure_peer(n, reps, target, configs):
+    """pymunk and circles at N side by side: each (scheme, precision) of `configs` on the
+    throughput rows' scene, pymunk on the same scene with the discrete scheme's default dt.
+    Every repeat times each engine's steps (about `target` seconds each) one after another, so
+    that the drift of a shared machine falls on all alike. Returns the pymunk row and one ratio
+    row per configuration: the ratio of the medians, and the least and greatest ratio within
+    one repeat."""
     pos, vel, radius, mass, box = start_state(n, AREA_FRACTION, ASPECT, "walls")
     t0 = now()
     gas = peer_pymunk.PymunkGas(pos, vel, radius, mass, box)
     build_s = now() - t0
+    sims = {cfg: circles.Simulation(circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls",
+                                                  scheme=cfg[0], precision=cfg[1], seed=0)) for cfg in configs}
+    dt = next((sim.dt for (scheme, _), sim in sims.items() if scheme == "discrete"),
+              circles.simulation.default_dt("discrete", radius, vel))
+    runners = {"pymunk": lambda k: gas.step(dt, k)}
+    runners.update({cfg: sim.step for cfg, sim in sims.items()})
     e0 = gas.kinetic_energy()
-    t0 = now()
-    gas.step(dt, 1)
-    first_s = now() - t0
-    t0 = now()
-    gas.step(dt, 1)
-    second_s = now() - t0
-    k = int(max(1, round(target / max(second_s, 1e-9))))
-    times = []
-    for _ in range(reps):
+    first, steps = {}, {}
+    for key, run in runners.items():
+        # Warm-up: the first step; for circles, steps up to its first reorder of the arrays (whose
+        # kernels compile on first use); then a step that sets the repeat length.
         t0 = now()
-        gas.step(dt, k)
-        times.append(now() - t0)
-    s = spread([k / t for t in times])
-    return dict(peer="pymunk " + pymunk_version(), n=n, dt=dt, build_s=build_s, warmup_first_step_s=first_s,
-                steps_per_rep=k, reps=reps, steps_per_s_median=s["median"], steps_per_s_min=s["min"],
-                steps_per_s_max=s["max"], circle_steps_per_s_median=n * s["median"],
-                circle_steps_per_s_min=n * s["min"], circle_steps_per_s_max=n * s["max"],
-                sim_time_per_wall_s=dt * s["median"],
+        run(1)
+        first[key] = now() - t0
+        if key != "pymunk":
+            run(circles.simulation.REORDER_EVERY)
+        t0 = now()
+        run(1)
+        steps[key] = int(max(1, round(target / max(now() - t0, 1e-9))))
+    rates = {key: [] for key in runners}
+    for _ in range(reps):
+        for key, run in runners.items():
+            t0 = now()
+            run(steps[key])
+            rates[key].append(steps[key] / (now() - t0))
+    p = spread(rates["pymunk"])
+    peer = dict(peer="pymunk " + pymunk_version(), n=n, dt=dt, build_s=build_s, warmup_first_step_s=first["pymunk"],
+                steps_per_rep=steps["pymunk"], reps=reps, steps_per_s_median=p["median"], steps_per_s_min=p["min"],
+                steps_per_s_max=p["max"], circle_steps_per_s_median=n * p["median"],
+                circle_steps_per_s_min=n * p["min"], circle_steps_per_s_max=n * p["max"],
+                sim_time_per_wall_s=dt * p["median"],
                 energy_rel_change=abs(gas.kinetic_energy() - e0) / e0, max_overlap=gas.max_overlap())
+    ratios = []
+    for (scheme, precision), sim in sims.items():
+        c = spread(rates[(scheme, precision)])
+        each = [a / b for a, b in zip(rates[(scheme, precision)], rates["pymunk"])]
+        ratios.append(dict(n=n, scheme=scheme, precision=precision, dt=sim.dt, steps_per_rep=steps[(scheme, precision)],
+                           circle_steps_per_s_median=n * c["median"], circle_steps_per_s_min=n * c["min"],
+                           circle_steps_per_s_max=n * c["max"], circle_steps_ratio=c["median"] / p["median"],
+                           ratio_min=min(each), ratio_max=max(each),
+                           sim_time_ratio=sim.dt * c["median"] / (dt * p["median"])))
+    return peer, ratios
 
 
 def pymunk_version():
@@ -706,10 +737,17 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
                        [[p["n"], p["dt"], f"{g(p['steps_per_s_median'])} [{g(p['steps_per_s_min'])}, "
                          f"{g(p['steps_per_s_max'])}]", p["circle_steps_per_s_median"], p["sim_time_per_wall_s"],
                          p["energy_rel_change"], p["max_overlap"]] for p in peers]), "",
-              "Ratios circles / pymunk at equal N (above 1: circles is faster). circle-steps: per step of its own "
-              "dt; sim time: simulated time per wall second (the event scheme takes 1.5x longer steps).", "",
-              md_table(["N", "scheme", "prec", "circle-steps ratio", "sim-time ratio"],
-                       [[r["n"], r["scheme"], r["precision"], r["circle_steps_ratio"], r["sim_time_ratio"]]
+              "Ratios circles / pymunk at equal N (above 1: circles is faster), measured side by side with the "
+              "pymunk row: each repeat times pymunk, then each circles configuration, on the same scene. "
+              "circle-steps: per step of its own dt, the ratio of the medians with the least and greatest "
+              "ratio within one repeat; sim time: simulated time per wall second (the event scheme takes "
+              "1.5x longer steps).", "",
+              md_table(["N", "scheme", "prec", "circles circle-steps/s median [min, max]", "circle-steps ratio",
+                        "ratio in one repeat [min, max]", "sim-time ratio"],
+                       [[r["n"], r["scheme"], r["precision"],
+                         f"{g(r['circle_steps_per_s_median'])} [{g(r['circle_steps_per_s_min'])}, "
+                         f"{g(r['circle_steps_per_s_max'])}]", r["circle_steps_ratio"],
+                         f"[{g(r['ratio_min'])}, {g(r['ratio_max'])}]", r["sim_time_ratio"]]
                         for r in ratios]), ""]
     if wp:
         n = wp[0]["n"]
@@ -885,20 +923,18 @@ def main(argv=None):
     if "peers" not in skip:
         log("peer: pymunk")
         for n in cfg["peer_sizes"]:
-            dt = next((t["dt"] for t in throughput if t["n"] == n and t["scheme"] == "discrete"), None)
-            if dt is None:
-                dt = 0.2 * R / SPEED[1]
-            p = guarded(f"pymunk N={n}", measure_pymunk, n, cfg["reps"], cfg["target"], dt)
-            if p is None:
+            # The configurations of the throughput rows at this N (all of them when that section was skipped).
+            configs = [(t["scheme"], t["precision"]) for t in throughput if t["n"] == n] or \
+                [(scheme, precision) for scheme in SCHEMES for precision in precisions]
+            measured = guarded(f"pymunk N={n}", measure_peer, n, cfg["reps"], cfg["target"], configs)
+            if measured is None:
                 continue
+            p, side = measured
             peers.append(p)
+            ratios.extend(side)
             log(f"  N={n:>8} pymunk: {p['circle_steps_per_s_median']:.3g} circle-steps/s, energy change "
-                f"{p['energy_rel_change']:.2g}, overlap {p['max_overlap']:.2g}")
-            for t in throughput:
-                if t["n"] == n:
-                    ratios.append(dict(n=n, scheme=t["scheme"], precision=t["precision"],
-                                       circle_steps_ratio=t["circle_steps_per_s_median"] / p["circle_steps_per_s_median"],
-                                       sim_time_ratio=t["sim_time_per_wall_s"] / p["sim_time_per_wall_s"]))
+                f"{p['energy_rel_change']:.2g}, overlap {p['max_overlap']:.2g}; circles / pymunk: "
+                + ", ".join(f"{r['scheme']} {r['precision']} {r['circle_steps_ratio']:.3g}x" for r in side))
 
     save("peers")
     if "wp" not in skip:
