@@ -277,9 +277,18 @@ class Grid:
         self._dummy_mask = ti.ndarray(ti.i32, shape=1)
         self.ncx = self.ncy = 1
         self.reach = 0.0
+        self._shapes = {}  # reach -> (ncx, ncy): most steps ask for the reach of the step before
 
     def shape_for(self, reach: float):
         """Cells per axis for cells at least `reach` wide, within the cell capacity."""
+        shape = self._shapes.get(reach)
+        if shape is None:
+            if len(self._shapes) >= 64:
+                self._shapes = {}
+            shape = self._shapes[reach] = self._shape_for(reach)
+        return shape
+
+    def _shape_for(self, reach: float):
         w, h = self.box
         reach = max(reach, 1e-300)
         ncx = max(1, min(int(w / reach), 1 << 20))

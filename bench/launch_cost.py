@@ -1,0 +1,72 @@
+"""What a kernel call costs on a CPU besides its kernel: Python's work and Taichi's launch.
+
+    python bench/launch_cost.py [--calls 5000]
+
+Kernels that do (almost) nothing, with 1 and with 30 ndarray arguments (and two scalars), each
+called `calls` times in a row through circles' fast calls (`circles/launch.py`) and through
+Taichi's own call; microseconds per call, the best of three runs. Then the share of Taichi's
+launch alone (the C++ call that the fast path ends in), from the same calls timed without
+the Python around them.
+"""
+import argparse
+import time
+
+import taichi as ti
+
+import circles
+from circles import launch
+
+nd = ti.types.ndarray(ndim=1)
+
+
+def one_array(a: nd, x: ti.f64, y: ti.f64) -> ti.i32:
+    a[0] = x + y
+    return 1
+
+
+def thirty_arrays(a0: nd, a1: nd, a2: nd, a3: nd, a4: nd, a5: nd, a6: nd, a7: nd, a8: nd, a9: nd, a10: nd, a11: nd,
+                  a12: nd, a13: nd, a14: nd, a15: nd, a16: nd, a17: nd, a18: nd, a19: nd, a20: nd, a21: nd, a22: nd,
+                  a23: nd, a24: nd, a25: nd, a26: nd, a27: nd, a28: nd, a29: nd, x: ti.f64, y: ti.f64) -> ti.i32:
+    a0[0] = x + y
+    return 1
+
+
+def per_call(fn, args, calls):
+    """Best of three runs of `calls` calls, microseconds per call."""
+    fn(*args)
+    fn(*args)
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            fn(*args)
+        best = min(best, time.perf_counter() - t0)
+    return best / calls * 1e6
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calls", type=int, default=5000)
+    args = parser.parse_args()
+    circles.init(arch="cpu")
+    program = ti.lang.impl.get_runtime().prog
+    print(f"microseconds per call, best of 3 x {args.calls} calls")
+    for name, fn, count in (("1 array", one_array, 1), ("30 arrays", thirty_arrays, 30)):
+        arrays = [ti.ndarray(ti.f64, shape=4) for _ in range(count)]
+        call_args = arrays + [1.0, 2.0]
+        fast = launch.kernel(fn)
+        plain = ti.kernel(fn)
+        fast_us = per_call(fast, call_args, args.calls)
+        plain_us = per_call(plain, call_args, args.calls)
+        # The fast path's binding for these arrays: its context and the kernel it launches
+        # (an engine whose bindings keep no kernel, an older one, has no such column).
+        binding = next(iter(fast._bindings.values()))
+        alone = ""
+        if hasattr(binding, "launchable"):
+            launch_us = per_call(lambda: program.launch_kernel(binding.launchable, binding.ctx), (), args.calls)
+            alone = f"   of which Taichi's launch alone {launch_us:6.1f}"
+        print(f"  {name:10s} fast call {fast_us:6.1f}   Taichi's call {plain_us:6.1f}{alone}")
+
+
+if __name__ == "__main__":
+    main()
