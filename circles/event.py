@@ -33,9 +33,12 @@ ones in the block of fine cells its reach spans and the large ones in its coarse
 one level, so the state is the same bit for bit.
 
 The grid and the bounds assume every speed stays below vlim during the step. A collision
-that would exceed it (a light circle hit by a heavy one) is not executed: the step is redone
-up to that collision's time (the events before it are the same, by causality), and the next
-step rebuilds the grid for the new speeds.
+that would exceed it (a light circle hit by a heavy one) ends the step at its time: the
+rounds, which execute independent events out of time order, redo the step up to that time
+(the events before it are the same, by causality); the queue, which executes them in time
+order, has executed exactly those when it meets the collision, and goes on with the step's
+end moved to its time. Events at exactly that time, the collision among them, are executed
+(a step's last instant belongs to it). The next step rebuilds the grid for the new speeds.
 """
 import taichi as ti
 
@@ -784,13 +787,14 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                heap_hi: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
                virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-               t_offset: ti.f64, scalars: ndarr, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
+               t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
                r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
-               two_level: ti.template(), serial: ti.template()) -> ti.i32:
-    """A whole step from one queue (see above). Returns the number of events executed, -1 when
-    a collision would outrun the grid (scalars[1] is its time: the step is redone up to it, as
-    with the rounds), or -2 when the earliest event is not its partner's (an internal error).
+               two_level: ti.template(), serial: ti.template()) -> ti.f64:
+    """A whole step from one queue (see above). Returns the time the step reached: t_end, or
+    the time of a collision that would outrun the grid, where the step ends (see the module's
+    docstring); -1 when the earliest event is not its partner's (an internal error). Every
+    circle is left at its own time (tau); `finish` brings them to the step's end.
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -800,6 +804,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     n = pos.shape[0]
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
+    reached = t_end
     if ti.static(serial and not two_level):
         _first_events_once(pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
                            segs, box_w, box_h, horizon, real, periodic)
@@ -817,7 +822,6 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     for i in range(n):
         where[i] = -1
         stamp[i] = 0
-    result = 0
     queue = ti.static((heap, where, heap_t, heap_lo, heap_hi, pending))
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -837,18 +841,23 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         while size > 0:
             c = heap[0]
             e = ev_t[c]
+            if e > horizon:
+                break  # the queue holds events up to the end the step had before it was cut
             p = ev_p[c]
             changed = 1
             if p >= 0:
                 if ev_p[p] != c or ev_t[p] != e:
-                    result = -2
+                    reached = -1.0
                     break
                 status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
                                      virial, box, periodic)
                 if status == 0:
-                    scalars[1] = e
-                    result = -1
-                    break
+                    # It would outrun the grid: the step ends at e, which it executes (e is not
+                    # before the new end). Later predictions look no further than e.
+                    horizon = e
+                    reached = ti.cast(e, ti.f64)
+                    status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
+                                         virial, box, periodic)
                 if ti.static(record):
                     if status == 1:
                         _log(e, ti.min(ids[c], ids[p]), ti.max(ids[c], ids[p]), t_offset, counters, log_t, log_i,
@@ -889,9 +898,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                 subjects += more
                 size = _heap_fix(y, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
                 m += 1
-        if result == 0:
-            result = executed
-    return result
+    return reached
 
 
 @launch.kernel

@@ -193,7 +193,8 @@ class Simulation:
         self.steps = 0
         self.rounds = 0
         self.sweeps = 0
-        self.redone_steps = 0
+        # Event steps cut short because a collision would outrun the grid (see circles.event).
+        self.cut_steps = 0
         self._mass = np.asarray(mass, dtype=np.float64).copy()
         self._radius = np.asarray(radius, dtype=np.float64).copy()
         self._color = np.asarray(color, dtype=np.uint8).copy()
@@ -296,8 +297,10 @@ class Simulation:
         self._heap_hi = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         # The queue's list of neighbours that search again after an event (`event.queue_step`).
         self._pending = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
-        self._backup = {name: self._like(getattr(self, name))
-                        for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
+        # What a step changes, kept for the rounds to redo a step cut short; the queue needs no copy.
+        self._backup = None if self._event_queue else {
+            name: self._like(getattr(self, name))
+            for name in ("pos", "vel", "pair_count", "wall_count", "virial", "wall_impulse")}
 
     @staticmethod
     def _like(arr):
@@ -438,6 +441,8 @@ class Simulation:
             self._build_two_levels(2.0 * vlim * h)
         else:
             self.grid.build(self.pos, reach)
+        if self._event_queue:
+            return self._queue_step(h, vlim)
         g = self.grid.args()
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
         b = self._backup
@@ -446,8 +451,6 @@ class Simulation:
                          self._dirty, self._moved, self._scalars, real, self._serial)
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
-        if self._event_queue:
-            return self._queue_step(t_end, vlim, log_count)
         sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
         while True:
             tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
@@ -472,6 +475,9 @@ class Simulation:
             self.rounds += 1
             if executed < 0:
                 # A collision would outrun the grid: redo the step up to it (see circles.event).
+                # The redo may meet an earlier such collision and be redone again: one cut step.
+                if t_end == h:
+                    self.cut_steps += 1
                 t_end = self._redo(log_count)
                 continue
             if executed == 0:
@@ -498,31 +504,28 @@ class Simulation:
                            my, ncx_c, ncy_c)
         self._levels = (self._coarse_start, self._coarse_ids, ncx_c, ncy_c, mx, my, self._r_cut, margin)
 
-    def _queue_step(self, t_end, vlim, log_count):
-        """The rest of an event step from one queue (see `EVENT_QUEUE_ON_CPU`); returns as `_event_step`."""
+    def _queue_step(self, h, vlim):
+        """The rest of an event step over [0, h] from one queue (see `EVENT_QUEUE_ON_CPU`); returns
+        as `_event_step`. No backup: a step cut short ends where the queue stopped (see circles.event)."""
         w, hgt = self.box
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
         g = self.grid.args()
         two = self._two_level
         levels = self._levels if two else (self._coarse_start, self._coarse_start, 1, 1, 1, 1, 0.0, 0.0)
-        while True:
-            # The rounds' arrays (bounds, flags) hold the queue: circles, places, keys.
-            executed = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
-                                        self._ev_p, self._dirty, *self._active, self._d1, self._moved, self._heap_hi,
-                                        self._pending, self.pair_count, self.wall_count,
-                                        self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
-                                        self._scalars, self._counters, self._log_t, self._log_i, self._log_j,
-                                        *levels, real, periodic, record, two, self._serial)
-            self.rounds += 1
-            if executed == -1:
-                t_end = self._redo(log_count)
-                continue
-            if executed < 0:
-                raise RuntimeError(f"the earliest event of the queue was not its partner's at step time "
-                                   f"{t_end} (internal error)")
-            break
-        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic, self._serial)
-        return t_end
+        # The rounds' arrays (bounds, flags) hold the queue: circles, places, keys.
+        reached = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
+                                   self._ev_p, self._dirty, *self._active, self._d1, self._moved, self._heap_hi,
+                                   self._pending, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
+                                   *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
+                                   self._log_j, *levels, real, periodic, record, two, self._serial)
+        self.rounds += 1
+        if reached < 0:
+            raise RuntimeError(f"the earliest event of the queue was not its partner's at step time {h} "
+                               "(internal error)")
+        if reached != h:
+            self.cut_steps += 1
+        event.finish(self.pos, self.vel, self.tau, reached, w, hgt, real, periodic, self._serial)
+        return reached
 
     def _redo(self, log_count):
         """Restore the state at the step's start for a step cut short at the collision that would
@@ -536,7 +539,6 @@ class Simulation:
         if self._record_cap > 0:
             self._set_counter(1, log_count)
         self._set_scalars(NEVER, NEVER)
-        self.redone_steps += 1
         return cut
 
     def _discrete_step(self, h):

@@ -51,12 +51,14 @@ def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
     assert len(ea) == sa["pair_collisions"] + sa["wall_collisions"] > 0
     assert np.array_equal(ea, eb)
     assert rounds.time == queue.time
-    # One launch per step for the queue (two more per step cut short: the redo, and the rest of
-    # the step), several rounds per step for the other.
-    assert queue.rounds <= queue.steps + 2 * queue.redone_steps < rounds.rounds
+    # One launch per step for the queue (one more per step cut short: the rest of the step),
+    # several rounds per step for the other. Both cut the same steps short (the rounds redo
+    # them; the queue stops where the collision is).
+    assert queue.rounds == queue.steps + queue.cut_steps < rounds.rounds
+    assert queue.cut_steps == rounds.cut_steps
     if name in ("walls-f64-radius", "walls-f64-spread"):
-        # Both cut steps short here (a light circle hit by a heavy one), at the same collisions.
-        assert queue.redone_steps > 0
+        # Steps are cut short here (a light circle hit by a heavy one).
+        assert queue.cut_steps > 0
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
@@ -130,7 +132,7 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
     assert np.sum((lo < 20) & (hi >= 20)) > 100  # small-large pairs
     assert np.sum((hi >= 0) & (hi < 20)) > 0  # large-large pairs
     assert np.sum((lo >= 20) & (hi >= 0)) > 1000 and np.sum(hi < 0) > 100  # small-small pairs, walls
-    assert two.redone_steps > 0
+    assert two.cut_steps > 0
     for other in (one, rounds):
         a, b = two.state(), other.state()
         assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
@@ -138,4 +140,4 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
         for key in ("pair_collisions", "wall_collisions", "virial", "wall_impulse"):
             assert sa[key] == sb[key], key
         assert np.array_equal(ev, other.events())
-        assert two.redone_steps == other.redone_steps
+        assert two.cut_steps == other.cut_steps
