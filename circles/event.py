@@ -791,10 +791,10 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
                r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
                two_level: ti.template(), serial: ti.template()) -> ti.f64:
-    """A whole step from one queue (see above). Returns the time the step reached: t_end, or
-    the time of a collision that would outrun the grid, where the step ends (see the module's
-    docstring); -1 when the earliest event is not its partner's (an internal error). Every
-    circle is left at its own time (tau); `finish` brings them to the step's end.
+    """A whole step from one queue (see above), every circle moved to its end at the last
+    (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
+    collision that would outrun the grid, where the step ends (see the module's docstring);
+    -1 when the earliest event is not its partner's (an internal error).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -898,6 +898,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                 subjects += more
                 size = _heap_fix(y, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
                 m += 1
+    # A top-level loop (one inside a branch would run on one thread).
+    _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial)
     return reached
 
 
@@ -905,7 +907,13 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
            real: ti.template(), periodic: ti.template(), serial: ti.template()):
     """Every circle moved to the step's end (from its own time tau); with `serial`, on one thread."""
-    horizon = ti.cast(t_end, real)
+    _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial)
+
+
+@ti.func
+def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon, box_w, box_h, real: ti.template(),
+            periodic: ti.template(), serial: ti.template()):
+    """`finish` to the step's end `horizon` (of type real), as a loop of the calling kernel."""
     ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         box = ti.Vector([box_w, box_h], dt=real)

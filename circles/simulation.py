@@ -505,8 +505,9 @@ class Simulation:
         self._levels = (self._coarse_start, self._coarse_ids, ncx_c, ncy_c, mx, my, self._r_cut, margin)
 
     def _queue_step(self, h, vlim):
-        """The rest of an event step over [0, h] from one queue (see `EVENT_QUEUE_ON_CPU`); returns
-        as `_event_step`. No backup: a step cut short ends where the queue stopped (see circles.event)."""
+        """The rest of an event step over [0, h] from one queue (see `EVENT_QUEUE_ON_CPU`), in one
+        launch that also brings every circle to the step's end; returns as `_event_step`. No
+        backup: a step cut short ends where the queue stopped (see circles.event)."""
         w, hgt = self.box
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
         g = self.grid.args()
@@ -524,7 +525,6 @@ class Simulation:
                                "(internal error)")
         if reached != h:
             self.cut_steps += 1
-        event.finish(self.pos, self.vel, self.tau, reached, w, hgt, real, periodic, self._serial)
         return reached
 
     def _redo(self, log_count):
