@@ -758,13 +758,9 @@ def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.tem
     elif k >= 0:
         size -= 1
         where[x] = -1
-        if k < size:
-            last = heap[size]
-            heap[k] = last
-            where[last] = k
-            heap_t[k] = heap_t[size]
-            heap_lo[k] = heap_lo[size]
-            heap_hi[k] = heap_hi[size]
+        if k < size:  # the last event fills the hole
+            _heap_put(k, heap[size], heap_t[size], heap_lo[size], heap_hi[size], heap, where, heap_t, heap_lo,
+                      heap_hi)
             moved = True
     if moved:
         k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
@@ -829,10 +825,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         size = 0
         for i in range(n):
             if ev_p[i] != NO_EVENT:
-                heap[size] = i
-                where[i] = size
-                heap_t[size], heap_lo[size], heap_hi[size] = event_key(i, ev_t, ev_p, ids, n)
-                size += 1
+                slot_i, size = _heap_keyed(i, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
         k = size // 2 - 1
         while k >= 0:
             _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)

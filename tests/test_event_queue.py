@@ -65,18 +65,16 @@ def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
 @pytest.mark.parametrize("name", ["walls-f32-equal", "periodic-f32-dense", "periodic-f64-area"])
 def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
     """Scenes this small run the queue's first predictions on one thread, each pair's time
-    offered to both circles (event._first_events_once), and the grid build, backup and
-    finish serially too (backend.SERIAL_N); with that limit at 0 they run as a large scene's
+    offered to both circles (event._first_events_once), and the grid build and the finish
+    serially too (backend.SERIAL_N); with that limit at 0 they run as a large scene's
     do, on several threads, each circle searching all its cells. The state must equal the
     rounds' bit for bit."""
-    from circles import backend, simulation
+    from circles import backend
 
     rounds = run(circles_cpu, monkeypatch, SCENES[name], False)
     monkeypatch.setattr(backend, "SERIAL_N", 0)
-    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", True)
-    sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **SCENES[name]), record_events=100_000)
+    sim = run(circles_cpu, monkeypatch, SCENES[name], True)
     assert not sim._serial and sim._event_queue
-    sim.step(25)
     a, b = rounds.state(), sim.state()
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     assert rounds.stats()["pair_collisions"] == sim.stats()["pair_collisions"] > 1000
