@@ -20,6 +20,7 @@ import taichi as ti
 
 from . import launch
 from .geometry import cell_index, cell_total, cells_in, spans
+from .loops import each, unroll
 
 
 #: Cells per chunk of the prefix sum (one thread sums a chunk), on a CPU and on a GPU: a GPU
@@ -91,11 +92,15 @@ def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.tem
     """The stages after counting: cell starts, then ids scattered into their slots; with
     `serial`, every loop on one thread (see backend.SERIAL_N)."""
     prefix_sum(cell_count, cell_start, cells_in(ncx, ncy, periodic), serial)
-    ti.loop_config(serialize=serial)
-    for i in range(cell_of.shape[0]):
-        c = cell_of[i]
-        if c >= 0:
-            sorted_ids[cell_start[c] + slot[i]] = i
+    each(cell_of.shape[0], _scatter, (cell_of, slot, cell_start, sorted_ids), serial)
+
+
+@ti.func
+def _scatter(i, a: ti.template()):
+    """Circle i's id into its slot of `sorted_ids`: a = (cell_of, slot, cell_start, sorted_ids)."""
+    c = a[0][i]
+    if c >= 0:
+        a[3][a[2][c] + a[1][i]] = i
 
 
 @ti.func
@@ -157,12 +162,28 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells, serial: ti.te
         for b in range(nchunks):
             lo = b * chunk
             hi = ti.min(lo + chunk, ncells)
-            running = start[lo]
-            for c in range(lo, hi - 1):
-                running += count[c]
-                start[c + 1] = running
-                count[c] = 0
-            count[hi - 1] = 0
+            _run_starts(count, start, lo, hi)
+
+
+@ti.func
+def _run_starts(count: ti.template(), start: ti.template(), lo, hi):
+    """start[c + 1] = start[c] + count[c] for c in [lo, hi - 1) from start[lo], and
+    count[lo:hi] set to 0, `unroll()` cells per iteration (see `loops`)."""
+    u = ti.static(unroll())
+    running = start[lo]
+    c = lo
+    while c + u <= hi - 1:
+        for k in ti.static(range(u)):
+            running += count[c + k]
+            start[c + k + 1] = running
+            count[c + k] = 0
+        c += u
+    while c < hi - 1:
+        running += count[c]
+        start[c + 1] = running
+        count[c] = 0
+        c += 1
+    count[hi - 1] = 0
 
 
 @ti.func

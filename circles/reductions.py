@@ -4,6 +4,7 @@ import taichi as ti
 from . import launch
 from .backend import current_arch
 from .geometry import displacement, neighbour_range
+from .loops import each
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -103,13 +104,21 @@ def copy_vec(src: ndarr, dst: ndarr):
 
 
 @ti.func
+def _gather(k, a: ti.template()):
+    """a = (src, dst, order): dst[k] = src[order[k]]."""
+    a[1][k] = a[0][a[2][k]]
+
+
+@ti.func
+def _copy(k, a: ti.template()):
+    """a = (src, dst): dst[k] = src[k]."""
+    a[1][k] = a[0][k]
+
+
+@ti.func
 def _permute_one(arr: ti.template(), scratch: ti.template(), order: ti.template(), serial: ti.template()):
-    ti.loop_config(serialize=serial)
-    for k in range(arr.shape[0]):
-        scratch[k] = arr[order[k]]
-    ti.loop_config(serialize=serial)
-    for k in range(arr.shape[0]):
-        arr[k] = scratch[k]
+    each(arr.shape[0], _gather, (arr, scratch, order), serial)
+    each(arr.shape[0], _copy, (scratch, arr), serial)
 
 
 @launch.kernel
