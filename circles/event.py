@@ -63,17 +63,16 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     dv = vel[hi] - vel[lo]
     s = radius[lo] + radius[hi]
     b = dx.dot(dv)
-    t = ti.cast(NEVER, real)
-    if b < 0:
-        c = dx.dot(dx) - s * s
-        if c <= 0:
-            t = t0  # touching (or overlapping by round-off) and approaching: collide now
-        else:
-            a = dv.dot(dv)
-            disc = b * b - a * c
-            if disc > 0:
-                t = t0 + c / (-b + ti.sqrt(disc))  # the root without cancellation
-    return t
+    c = dx.dot(dx) - s * s
+    a = dv.dot(dv)
+    disc = b * b - a * c
+    # Every case computed and the answer selected, with no branches: which case a pair falls in
+    # is close to random, and a mispredicted branch costs more than the square root.
+    never = ti.cast(NEVER, real)
+    hit = t0 + c / (-b + ti.sqrt(ti.max(disc, 0.0)))  # the root without cancellation
+    t = ti.select(disc > 0, hit, never)
+    t = ti.select(c <= 0, t0, t)  # touching (or overlapping by round-off) and approaching: collide now
+    return ti.select(b < 0, t, never)
 
 
 @ti.func
@@ -261,14 +260,13 @@ def _wall_events(i, pos: ti.template(), vel: ti.template(), radius: ti.template(
     vi = vel[i]
     ri = radius[i]
     for axis in ti.static(range(2)):
-        t = ti.cast(NEVER, real)
-        w = 0
-        if vi[axis] < 0:
-            t = ti_ + ti.max(xi[axis] - ri, 0.0) / (-vi[axis])
-            w = 2 * axis
-        elif vi[axis] > 0:
-            t = ti_ + ti.max(box[axis] - ri - xi[axis], 0.0) / vi[axis]
-            w = 2 * axis + 1
+        # The wall it heads for, both gaps computed and one selected, with no branches (the
+        # signs of the velocities are random); -v and |v| are the same number for v < 0.
+        v = vi[axis]
+        low = v < 0
+        gap = ti.select(low, ti.max(xi[axis] - ri, 0.0), ti.max(box[axis] - ri - xi[axis], 0.0))
+        t = ti.select(v != 0, ti_ + gap / ti.abs(v), ti.cast(NEVER, real))
+        w = 2 * axis + ti.select(low, 0, 1)
         if t <= horizon and key_less(t, ids[i], n + w, best_t, best_lo, best_hi):
             best_t, best_lo, best_hi, best_p = t, ids[i], n + w, -1 - w
     return best_t, best_lo, best_hi, best_p
