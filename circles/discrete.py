@@ -28,7 +28,8 @@ collisions can be missed or counted twice.
 import taichi as ti
 
 from . import launch
-from .geometry import NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, wide_row
+from .geometry import (NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, run_parts,
+                       wide_row)
 from .grid import enter_cell, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
@@ -153,7 +154,8 @@ def _search_run(c, r, kx, ky, cell_start: ti.template(), ncx, ncy, segs, periodi
     if ti.static(two_level):
         lo, hi = wide_row(c, r - ky, kx, cell_start, ncx, ncy)
     else:
-        lo, hi = neighbour_range(c, r // segs, r % segs, cell_start, ncx, ncy, periodic)
+        row, seg = run_parts(r, segs, periodic)
+        lo, hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
     return lo, hi
 
 

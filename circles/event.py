@@ -45,7 +45,7 @@ import taichi as ti
 from . import launch
 from .discrete import NLARGE
 from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
-                       pairs_once, wide_row)
+                       pairs_once, run_parts, wide_row)
 
 #: Bound sweeps per launch (even: the two flag arrays swap roles each sweep).
 SWEEPS_PER_LAUNCH = 4
@@ -125,7 +125,8 @@ def _run(r, c, kx, ky, cell_start: ti.template(), coarse_start: ti.template(), n
                 lo = coarse_start[base + ti.max(gx - 1, 0)]
                 hi = coarse_start[base + ti.min(gx + 1, ncx_c - 1) + 1]
     else:
-        lo, hi = neighbour_range(c, r // segs, r % segs, cell_start, ncx, ncy, periodic)
+        row, seg = run_parts(r, segs, periodic)
+        lo, hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
     return lo, hi, coarse
 
 

@@ -114,6 +114,19 @@ def neighbour_range(c, row, seg, cell_start: ti.template(), ncx, ncy, periodic: 
 
 
 @ti.func
+def run_parts(r, segs, periodic: ti.template()):
+    """(row, seg) of run r of the runs rows x segs of `neighbour_range`. A walled box has one
+    run per row (segs = 1, see `spans`): no integer division, which takes tens of cycles in a
+    search that reads a few circles."""
+    row = r
+    seg = 0
+    if ti.static(periodic):
+        row = r // segs
+        seg = r % segs
+    return row, seg
+
+
+@ti.func
 def cell_coords(c, ncx):
     """(cx, cy) of cell number c of a walled box (the inverse of `cell_index`)."""
     stride = ncx + 1
