@@ -4,21 +4,25 @@
 
 Copies of a float32 array larger than the cache (the best of `reps` runs, bytes read plus
 written per second): a Taichi loop on all threads and on one thread, the one-thread loop
-unrolled by 16 with its 16 loads before its 16 stores, a read-only Taichi loop (a sum), and
-numpy's copy. Then the grid count of a discrete step alone (1e6 circles in cell order: the
-cell of each, counted into its cell with an atomic add) against the same pass that only
-writes the cell.
+unrolled by 16 with its 16 loads before its 16 stores, the package's `circles.loops.each`
+compiled to take 1, 8 (the package's `loops.CPU_UNROLL`) and 16 items per iteration on all
+threads and on one, a read-only Taichi loop (a sum), and numpy's copy. Then the grid count
+of a discrete step alone (1e6 circles in cell order: the cell of each, counted into its cell
+with an atomic add) against the same pass that only writes the cell.
 
 Taichi's generated loop reads each array's data pointer from the kernel's argument buffer
-at every access; after a store, which might alias that buffer, it reads it again, so every
-store-then-load pair waits on memory order. A loop with no store keeps the pointers in
-registers (the read-only row). See the README's known limits.
+at every access; after a store, which might alias that buffer, it reads it again, and a
+loop that takes one item per iteration runs far below the memory's speed. A loop with no
+store keeps the pointers in registers (the read-only row). See circles/loops.py and the
+README's known limits.
 """
 import argparse
 import time
 
 import numpy as np
 import taichi as ti
+
+from circles import loops
 
 nd = ti.types.ndarray(ndim=1)
 
@@ -73,6 +77,27 @@ def cell_and_count(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: 
         slot[i] = ti.atomic_add(count[c], 1)
 
 
+@ti.func
+def _copy_item(i, a: ti.template()):
+    a[1][i] = a[0][i]
+
+
+def each_copy(items, serial, src, dst):
+    """A copy through `loops.each`, compiled (by a first call) to take `items` items per
+    iteration: loops.unroll() is read when a kernel compiles."""
+    @ti.kernel
+    def copy(src: nd, dst: nd):
+        loops.each(src.shape[0], _copy_item, (src, dst), serial)
+
+    saved = loops.CPU_UNROLL
+    loops.CPU_UNROLL = items
+    try:
+        copy(src, dst)
+    finally:
+        loops.CPU_UNROLL = saved
+    return copy
+
+
 def best_of(reps, fn, before=None):
     times = []
     for _ in range(reps + 1):  # the first call compiles
@@ -105,6 +130,11 @@ def main():
             ("taichi loop, one thread, 16 loads then 16 stores", lambda: copy_serial_grouped(src, dst), moved),
             ("taichi read-only loop (sum), all threads", lambda: read_sum(src), moved / 2),
             ("numpy copyto, one thread", lambda: np.copyto(out, host), moved)]
+    for serial in (False, True):
+        for items in (1, 8, 16):
+            kernel = each_copy(items, serial, src, dst)
+            rows.insert(-2, (f"loops.each, {items} per iteration, {'one thread' if serial else 'all threads'}",
+                             lambda kernel=kernel: kernel(src, dst), moved))
     for name, fn, gb in rows:
         print(f"  {name:50s} {gb / best_of(args.reps, fn):6.2f}")
 

@@ -1,14 +1,16 @@
 """Parallel loops over n items that take several items per iteration on a CPU.
 
 Taichi reloads an array's address from the kernel's arguments at every access (it cannot tell
-that a store leaves the arguments alone), and a loop that takes one item per iteration then
-runs far below the memory's speed. `python bench/loop_unroll.py`, y = 1.5 x over 1e7 float32
-on this project's 2-core machine: 1.5 GB/s on one thread and 3.3 on two taking one item per
-iteration, 3.5 and 8.2 taking 8, 4.5 and 9.3 taking 16; numpy makes 12.4 on one thread. The
-passes that stream through arrays (the grid's scatter and cell starts, the reorder's copies)
-use `each`; passes whose items do much more work than a copy gain nothing measurable and keep
-plain loops. On a GPU consecutive threads must take consecutive items (coalesced loads), so
-there a loop takes one item per iteration.
+that a store leaves the arguments alone), and a loop that stores one item per iteration runs
+far below the memory's speed. `python bench/loop_cost.py` (a float32 copy of 128 MB, GB/s
+read plus written, on this project's 2-core machine): Taichi's plain loop 4.8 on two threads
+and 1.75 on one; `each` taking 8 items per iteration 5.9 and 3.5, taking 16 6.3 and 4.6;
+numpy 19 on one thread. In a discrete step at 1e6 (`bench/kernel_profile.py`, per-task
+minima) the cell starts took 1.5 ms instead of 3.5 and the scatter into cells 2.5 to 2.8
+instead of 3.2 to 3.3. Those passes, and the reorder's copies, use `each`; passes whose items
+do much more work than a copy measured no faster or slower (the overlap search, the move,
+the first round's pick and resolve) and keep plain loops. On a GPU consecutive threads must
+take consecutive items (coalesced loads), so there a loop takes one item per iteration.
 """
 import taichi as ti
 
