@@ -6,8 +6,8 @@
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
 in (0.5, 1.0), default dt; seed 1; or with `--scene spread` the radius-spread mixture of
-bench.py's spread rows) in fresh processes, alternating base and this tree `--rounds` times, so that the load of a
-shared machine falls on both alike; each process times single steps after 16 warm-up steps
+bench.py's spread rows) in fresh processes, alternating base and this tree `--rounds` times (base first in even
+rounds, this tree first in odd ones), so that the load of a shared machine falls on both alike; each process times single steps after 16 warm-up steps
 (which compile every kernel, the periodic reorder's included).
 Reported: median circle-steps/s of each engine with [min, max] over all its timed steps, the
 ratio of the medians, and the pair collisions and energy change of each (the same scene and
@@ -97,8 +97,11 @@ def main():
                 steps = args.steps or max(3, min(20, int(2e6 // n) if scheme == "event" else int(2e7 // n)))
                 speeds = {"base": [], "this": []}
                 last = {}
-                for _ in range(args.rounds):
-                    for name, tree in (("base", tmp), ("this", ROOT)):
+                for r in range(args.rounds):
+                    # Which tree runs first alternates too: on a loaded machine the first of two
+                    # back-to-back processes measured 10 to 20% faster, whichever tree it ran.
+                    pair = (("base", tmp), ("this", ROOT))
+                    for name, tree in (pair if r % 2 == 0 else pair[::-1]):
                         result = run(tree, n, scheme, steps, args.arch, args.scene)
                         speeds[name] += [n / t for t in result["times"]]
                         last[name] = result
