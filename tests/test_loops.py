@@ -27,7 +27,7 @@ def test_each_visits_every_item_once(circles_cpu, n, serial):
     assert np.array_equal(hits.to_numpy(), expected)
 
 
-def test_unroll_is_one_item_on_a_gpu(circles_cpu):
+def test_unroll_is_cpu_unroll_on_a_cpu_and_one_on_a_gpu(circles_cpu):
     # On the CPU the loops take CPU_UNROLL items per iteration; a GPU keeps one per thread.
     expected = 1 if circles_cpu.backend.current_arch() == "gpu" else loops.CPU_UNROLL
     assert loops.unroll() == expected
