@@ -22,7 +22,7 @@ import time
 import numpy as np
 import taichi as ti
 
-from circles import loops
+from circles import loops, reductions
 
 nd = ti.types.ndarray(ndim=1)
 
@@ -77,17 +77,12 @@ def cell_and_count(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: 
         slot[i] = ti.atomic_add(count[c], 1)
 
 
-@ti.func
-def _copy_item(i, a: ti.template()):
-    a[1][i] = a[0][i]
-
-
 def each_copy(items, serial, src, dst):
-    """A copy through `loops.each`, compiled (by a first call) to take `items` items per
-    iteration: loops.unroll() is read when a kernel compiles."""
+    """The reorder's copy (`reductions._copy`) through `loops.each`, compiled (by a first call)
+    to take `items` items per iteration: loops.unroll() is read when a kernel compiles."""
     @ti.kernel
     def copy(src: nd, dst: nd):
-        loops.each(src.shape[0], _copy_item, (src, dst), serial)
+        loops.each(src.shape[0], reductions._copy, (src, dst), serial)
 
     saved = loops.CPU_UNROLL
     loops.CPU_UNROLL = items

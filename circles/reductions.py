@@ -97,12 +97,6 @@ def max_overlap(pos: ndarr, radius: ndarr, cell_of: ndarr, cell_start: ndarr, so
     return out[0]
 
 
-@launch.kernel
-def copy_vec(src: ndarr, dst: ndarr):
-    for i in range(src.shape[0]):
-        dst[i] = src[i]
-
-
 @ti.func
 def _gather(k, a: ti.template()):
     """a = (src, dst, order): dst[k] = src[order[k]]."""
@@ -113,6 +107,11 @@ def _gather(k, a: ti.template()):
 def _copy(k, a: ti.template()):
     """a = (src, dst): dst[k] = src[k]."""
     a[1][k] = a[0][k]
+
+
+@launch.kernel
+def copy_vec(src: ndarr, dst: ndarr):
+    each(src.shape[0], _copy, (src, dst), False)
 
 
 @ti.func
