@@ -184,14 +184,14 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
               coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
-              queue: ti.template(), code, size, changed_a, changed_b, pend_at):
+              queue: ti.template(), code, size, changed_a, changed_b, pend_at, scale, nb):
     """Circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
     Neighbours: those of one grid level, or of two (`_runs`).
 
-    With a `queue` (heap, where, heap_t, heap_lo, heap_hi and pending of `queue_step`; else an
-    empty tuple), `moved` holds the queue's stamps, and with `code` >= 0 i is a circle whose
+    With a `queue` (heap, where, heap_t, head, nxt, prv and pending of `queue_step`, and its
+    calendar's scale and nb; else an empty tuple), `moved` holds the queue's stamps, and with `code` >= 0 i is a circle whose
     velocity an event changed (as changed_a, and changed_b when a pair's, else a value no
     partner has). A neighbour first met in this event (stamp below `code`) is stamped `code` + 1
     when its event was with changed_a or changed_b (it must search again: listed in pending
@@ -229,7 +229,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                         jp = ev_p[j]
                         if jp == changed_a or jp == changed_b:
                             moved[j] = code + 1
-                            queue[5][pend_at + pending] = j
+                            queue[6][pend_at + pending] = j
                             pending += 1
                         else:
                             moved[j] = code
@@ -245,8 +245,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                     if ti.static(len(queue) > 0):
                         if moved[j] == code:
                             if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
-                                size_now = _heap_earlier(j, size_now, queue[0], queue[1], queue[2], queue[3],
-                                                         queue[4], ev_t, ev_p, ids, n)
+                                size_now = _queue_fix(j, size_now, scale, nb, queue, ev_t, ev_p, ids, n)
     return best_t, best_p, size_now, pending
 
 
@@ -375,7 +374,7 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             t_i, p_i, unused, unused2 = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False, (),
-                                                  0, 0, 0, 0, 0)
+                                                  0, 0, 0, 0, 0, 0.0, 1)
             ev_t[i] = t_i
             ev_p[i] = p_i
     for i in range(n):
@@ -671,115 +670,176 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 # After an event only pairs with its circles changed. Their own searches compute each of those
 # pairs once and offer it to the neighbour (`_earliest` with a queue); only a neighbour whose
 # event was with one of them searches again in full.
+#
+# The queue is a calendar of buckets with a small heap in front: the step [0, t_end] is cut
+# into `nb` buckets of equal width, each a doubly linked list of the circles whose event falls
+# in it, in no order; the heap holds the events of the buckets already reached (the current
+# one and any event that came back into it), ordered by key. Taking the earliest event takes
+# the heap's top; when the heap runs empty, the next bucket's list is poured into it. A bucket
+# holds a few events, so the heap stays small enough to live in the cache and a changed event
+# costs a few stores, where one heap of every event would take a cache miss at each of its
+# twenty levels at 1e6. The order is the keys' order, the same as one heap's.
+
+#: Circles per bucket of the queue's calendar (see above).
+QUEUE_BUCKET_CIRCLES = 4
+#: head[b] of a bucket already poured into the heap: its events go to the heap directly.
+POURED = -2
 
 
 @ti.func
-def _heap_put(k, x, t, lo, hi, heap: ti.template(), where: ti.template(), heap_t: ti.template(),
-              heap_lo: ti.template(), heap_hi: ti.template()):
-    """Circle x, with its event's key (t, lo, hi), into queue slot k."""
-    heap[k] = x
-    where[x] = k
-    heap_t[k] = t
-    heap_lo[k] = lo
-    heap_hi[k] = hi
+def _tie_ids(x, ev_p: ti.template(), ids: ti.template(), n):
+    """(lo, hi): the ids part of circle x's event key (`event_key`)."""
+    p = ev_p[x]
+    lo = n + 8
+    hi = n + 8
+    if p >= 0:
+        lo = ti.min(ids[x], ids[p])
+        hi = ti.max(ids[x], ids[p])
+    elif p != NO_EVENT:
+        lo = ids[x]
+        hi = n + (-1 - p)
+    return lo, hi
 
 
 @ti.func
-def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-             heap_hi: ti.template()):
-    """Move the event in slot k up to its place; returns its new slot. The parents it passes
+def _before(x, t, y, u, ev_p: ti.template(), ids: ti.template(), n):
+    """Whether circle x's event, at time t, comes before circle y's, at u, by the key of
+    `event_key`; the ids are read only for equal times (the two circles of a pair, mostly)."""
+    less = t < u
+    if t == u:
+        xl, xh = _tie_ids(x, ev_p, ids, n)
+        yl, yh = _tie_ids(y, ev_p, ids, n)
+        less = xl < yl or (xl == yl and xh < yh)
+    return less
+
+
+@ti.func
+def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template(), ev_p: ti.template(),
+             ids: ti.template(), n):
+    """Move the event in heap slot k up to its place; returns its new slot. The parents it passes
     move down one level each, and it is written once, at its place (a hole moves up, not a
     swapped pair: half the stores)."""
     x = heap[k]
     t = heap_t[k]
-    lo = heap_lo[k]
-    hi = heap_hi[k]
     while k > 0:
         parent = (k - 1) // 2
-        if key_less(t, lo, hi, heap_t[parent], heap_lo[parent], heap_hi[parent]):
-            _heap_put(k, heap[parent], heap_t[parent], heap_lo[parent], heap_hi[parent], heap, where, heap_t,
-                      heap_lo, heap_hi)
+        y = heap[parent]
+        if _before(x, t, y, heap_t[parent], ev_p, ids, n):
+            heap[k] = y
+            heap_t[k] = heap_t[parent]
+            where[y] = k
             k = parent
         else:
             break
-    _heap_put(k, x, t, lo, hi, heap, where, heap_t, heap_lo, heap_hi)
+    heap[k] = x
+    heap_t[k] = t
+    where[x] = k
     return k
 
 
 @ti.func
-def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-               heap_hi: ti.template()):
-    """Move the event in slot k down to its place, the earlier of its two children moving up
-    each level (the hole of `_sift_up`, downwards)."""
+def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), ev_p: ti.template(),
+               ids: ti.template(), n):
+    """Move the event in heap slot k down to its place, the earlier of its two children moving
+    up each level (the hole of `_sift_up`, downwards)."""
     x = heap[k]
     t = heap_t[k]
-    lo = heap_lo[k]
-    hi = heap_hi[k]
     while 2 * k + 1 < size:
         m = 2 * k + 1
-        if m + 1 < size and key_less(heap_t[m + 1], heap_lo[m + 1], heap_hi[m + 1], heap_t[m], heap_lo[m],
-                                     heap_hi[m]):
+        if m + 1 < size and _before(heap[m + 1], heap_t[m + 1], heap[m], heap_t[m], ev_p, ids, n):
             m += 1
-        if key_less(heap_t[m], heap_lo[m], heap_hi[m], t, lo, hi):
-            _heap_put(k, heap[m], heap_t[m], heap_lo[m], heap_hi[m], heap, where, heap_t, heap_lo, heap_hi)
+        y = heap[m]
+        if _before(y, heap_t[m], x, t, ev_p, ids, n):
+            heap[k] = y
+            heap_t[k] = heap_t[m]
+            where[y] = k
             k = m
         else:
             break
-    _heap_put(k, x, t, lo, hi, heap, where, heap_t, heap_lo, heap_hi)
+    heap[k] = x
+    heap_t[k] = t
+    where[x] = k
 
 
 @ti.func
-def _heap_keyed(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-                heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
-    """(slot, size): circle x's slot in the queue, appended at the end when it had none, with its
-    event's key written there (the slot is not yet in heap order)."""
-    k = where[x]
-    if k < 0:
-        k = size
-        heap[k] = x
-        where[x] = k
+def _bucket(t, scale, nb):
+    """The calendar bucket of time t in [0, t_end] (scale = nb / t_end): monotone in t, so the
+    buckets' order agrees with the times'."""
+    return ti.min(ti.cast(t * scale, ti.i32), nb - 1)
+
+
+@ti.func
+def _queue_put(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(),
+               n):
+    """Circle x, which has an event and is not in the queue, into it: into the heap when its
+    bucket was poured, else at the front of its bucket's list. Returns the heap's size.
+    q: (heap, where, heap_t, head, nxt, prv, pending)."""
+    t = ev_t[x]
+    b = _bucket(t, scale, nb)
+    first = q[3][b]
+    if first == POURED:
+        q[0][size] = x
+        q[2][size] = t
+        _sift_up(size, q[0], q[1], q[2], ev_p, ids, n)
         size += 1
-    heap_t[k], heap_lo[k], heap_hi[k] = event_key(x, ev_t, ev_p, ids, n)
-    return k, size
-
-
-@ti.func
-def _heap_fix(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-              heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
-    """Put circle x where its (changed) event belongs in the queue, which holds each circle with
-    an event once, with its key: in it when it has an event, out of it when not. Returns the
-    new size."""
-    k = where[x]
-    moved = False  # whether slot k holds an event that must move up or down to its place
-    if ev_p[x] != NO_EVENT:
-        k, size = _heap_keyed(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
-        moved = True
-    elif k >= 0:
-        size -= 1
-        where[x] = -1
-        if k < size:  # the last event fills the hole
-            _heap_put(k, heap[size], heap_t[size], heap_lo[size], heap_hi[size], heap, where, heap_t, heap_lo,
-                      heap_hi)
-            moved = True
-    if moved:
-        k = _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
-        _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
+    else:
+        q[4][x] = first
+        q[5][x] = -1
+        if first >= 0:
+            q[5][first] = x
+        q[3][b] = x
+        q[1][x] = -2 - b
     return size
 
 
 @ti.func
-def _heap_earlier(x, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), heap_lo: ti.template(),
-                  heap_hi: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
-    """`_heap_fix` for an event that came earlier (or a circle that had none): it can only move up."""
-    k, size = _heap_keyed(x, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
-    _sift_up(k, heap, where, heap_t, heap_lo, heap_hi)
+def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(),
+               n):
+    """Put circle x where its (changed) event belongs in the queue, which holds each circle with
+    an event once: in it when it has an event, out of it when not. Returns the heap's size."""
+    k = q[1][x]
+    has = ev_p[x] != NO_EVENT
+    b = -1
+    if has:
+        b = _bucket(ev_t[x], scale, nb)
+    if k >= 0:  # in the heap
+        if has and q[3][b] == POURED:  # stays there, moved to its place
+            q[2][k] = ev_t[x]
+            k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n)
+            _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n)
+        else:
+            size -= 1
+            q[1][x] = -1
+            if k < size:  # the last event fills the hole
+                q[0][k] = q[0][size]
+                q[2][k] = q[2][size]
+                k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n)
+                _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n)
+            if has:
+                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
+    elif k <= -2:  # in bucket -2 - k's list
+        old = -2 - k
+        if b != old:
+            nx = q[4][x]
+            pv = q[5][x]
+            if pv >= 0:
+                q[4][pv] = nx
+            else:
+                q[3][old] = nx
+            if nx >= 0:
+                q[5][nx] = pv
+            q[1][x] = -1
+            if has:
+                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
+    elif has:
+        size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
     return size
 
 
 @launch.kernel
 def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
-               ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, heap_lo: ndarr,
-               heap_hi: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
+               ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
+               prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
                virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
@@ -810,27 +870,44 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
             t_i, p_i, unused, unused2 = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                                                  margin, two_level, (), 0, 0, 0, 0, 0)
+                                                  margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1)
             ev_t[i] = t_i
             ev_p[i] = p_i
+    nb = head.shape[0]  # buckets: one per QUEUE_BUCKET_CIRCLES circles (the caller's allocation)
+    scale = ti.cast(nb / t_end, real)
     ti.loop_config(serialize=serial)
     for i in range(n):
         where[i] = -1
         stamp[i] = 0
-    queue = ti.static((heap, where, heap_t, heap_lo, heap_hi, pending))
+        if i < nb:
+            head[i] = -1
+    queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     ti.loop_config(serialize=True)
     for _ in range(1):
         box = ti.Vector([box_w, box_h], dt=real)
-        size = 0
+        size = 0  # of the heap; every bucket is still a list
         for i in range(n):
             if ev_p[i] != NO_EVENT:
-                slot_i, size = _heap_keyed(i, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
-        k = size // 2 - 1
-        while k >= 0:
-            _sift_down(k, size, heap, where, heap_t, heap_lo, heap_hi)
-            k -= 1
+                size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n)
+        cur = -1  # the last bucket poured into the heap
         executed = 0
-        while size > 0:
+        while True:
+            while size == 0 and cur < nb - 1:
+                cur += 1
+                x = head[cur]
+                head[cur] = POURED
+                while x >= 0:
+                    heap[size] = x
+                    heap_t[size] = ev_t[x]
+                    where[x] = size
+                    size += 1
+                    x = nxt[x]
+                k = size // 2 - 1
+                while k >= 0:
+                    _sift_down(k, size, heap, where, heap_t, ev_p, ids, n)
+                    k -= 1
+            if size == 0:
+                break
             c = heap[0]
             e = ev_t[c]
             if e > horizon:
@@ -886,9 +963,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                                          cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box,
                                                          horizon, real, periodic, coarse_start, coarse_ids, ncx_c,
                                                          ncy_c, mx, my, r_cut, margin, two_level, queue, code, size,
-                                                         c, other, subjects - changed)
+                                                         c, other, subjects - changed, scale, nb)
                 subjects += more
-                size = _heap_fix(y, size, heap, where, heap_t, heap_lo, heap_hi, ev_t, ev_p, ids, n)
+                size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n)
                 m += 1
     # A top-level loop (one inside a branch would run on one thread).
     _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial)

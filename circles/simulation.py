@@ -294,7 +294,9 @@ class Simulation:
         self._d1 = ti.ndarray(real, shape=n)
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
-        self._heap_hi = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
+        # The queue's calendar (`event.queue_step`): bucket heads, and each circle's back link.
+        self._head = ti.ndarray(ti.i32, shape=max(n // event.QUEUE_BUCKET_CIRCLES, 1) if self._event_queue else 1)
+        self._prv = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         # The queue's list of neighbours that search again after an event (`event.queue_step`).
         self._pending = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         # What a step changes, kept for the rounds to redo a step cut short; the queue needs no copy.
@@ -513,10 +515,11 @@ class Simulation:
         g = self.grid.args()
         two = self._two_level
         levels = self._levels if two else (self._coarse_start, self._coarse_start, 1, 1, 1, 1, 0.0, 0.0)
-        # The rounds' arrays (bounds, flags) hold the queue: circles, places, keys.
+        # The rounds' arrays (bounds, flags) hold the queue's heap (circles, places, times) and
+        # its lists' forward links.
         reached = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
-                                   self._ev_p, self._dirty, *self._active, self._d1, self._moved, self._heap_hi,
-                                   self._pending, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
+                                   self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
+                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
                                    self._log_j, *levels, real, periodic, record, two, self._serial)
         self.rounds += 1

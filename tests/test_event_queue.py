@@ -93,6 +93,59 @@ def test_queue_step_to_an_exact_time(circles_cpu, monkeypatch):
     assert np.array_equal(states[0].vel, states[1].vel)
 
 
+def lattice_head_on(side=40):
+    """side x side circles of radius 1/64 on a square lattice of spacing 1/16, the columns moving
+    along x at +0.5, 0, -0.5, +0.5, ...: every number is a short binary fraction, so each
+    resting circle is hit from both sides at one instant, and all rows alike (hundreds of
+    events share one time; which of a circle's two comes first is set by the ids alone); the
+    circles then meet the next columns and the walls the same way."""
+    s = 1.0 / 16
+    col, row = np.meshgrid(np.arange(side), np.arange(side))
+    pos = np.stack([(col.ravel() + 0.5) * s, (row.ravel() + 0.5) * s], axis=1)
+    vel = np.zeros_like(pos)
+    vel[:, 0] = 0.5 * (1 - col.ravel() % 3)
+    radius = np.full(side * side, 1.0 / 64)
+    return pos, vel, radius, (side * s, side * s)
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("scene", ["lattice", "walls-f32-equal", "walls-f64-spread"])
+def test_queue_calendar_any_bucket_width(circles_cpu, monkeypatch, scene):
+    """The queue keeps its events in a calendar of buckets in front of a small heap
+    (event.queue_step). However wide the buckets, from one bucket for the whole step (every
+    event in the heap) to one bucket per circle (nearly every event poured from a list), it
+    hands out the events in key order, so the states and event logs equal the rounds' bit for
+    bit: on a lattice whose events come hundreds at one instant, ordered by ids alone, and on
+    two scenes of the suite (one with steps cut short)."""
+    from circles import event, simulation
+
+    def make(queue, per_bucket):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", per_bucket)
+        if scene == "lattice":
+            pos, vel, radius, box = lattice_head_on()
+            sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, box=box, scheme="event", precision="f64",
+                                                     record_events=100_000)
+        else:
+            sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **SCENES[scene]),
+                                         record_events=100_000)
+        sim.step(30 if scene == "lattice" else 15)
+        return sim
+
+    rounds = make(False, 4)
+    ev = rounds.events()
+    if scene == "lattice":
+        _, count = np.unique(ev[:, 0], return_counts=True)
+        assert count.max() >= 400 and rounds.stats()["pair_collisions"] >= 3000
+    for per_bucket in (10**9, 1):
+        sim = make(True, per_bucket)
+        assert sim._head.shape[0] == (1 if per_bucket > 1 else sim.n)
+        a, b = rounds.state(), sim.state()
+        assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+        assert np.array_equal(ev, sim.events())
+        assert sim.cut_steps == rounds.cut_steps
+
+
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("precision", ["f32", "f64"])
 def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, precision):
