@@ -682,6 +682,9 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 
 #: Circles per bucket of the queue's calendar (see above).
 QUEUE_BUCKET_CIRCLES = 4
+#: A step that executes more events than this per circle (at most 2**30 in all) stops with an
+#: error: circles jammed in a chain across the box collide without end at one instant.
+QUEUE_MOST_EVENTS_PER_CIRCLE = 10_000
 #: head[b] of a bucket already poured into the heap: its events go to the heap directly.
 POURED = -2
 
@@ -763,9 +766,11 @@ def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.te
 
 @ti.func
 def _bucket(t, scale, nb):
-    """The calendar bucket of time t in [0, t_end] (scale = nb / t_end): monotone in t, so the
-    buckets' order agrees with the times'."""
-    return ti.min(ti.cast(t * scale, ti.i32), nb - 1)
+    """The calendar bucket of time t in [0, t_end] (scale = nb / t_end, float64, at most 1e30):
+    monotone in t, so the buckets' order agrees with the times'. In float64 and clamped before
+    the conversion, so that a step of 1e-36 (nb / t_end past float32's range, times 0 at a
+    touch) still gives a bucket in range."""
+    return ti.cast(ti.min(ti.max(ti.cast(t, ti.f64) * scale, 0.0), ti.cast(nb - 1, ti.f64)), ti.i32)
 
 
 @ti.func
@@ -849,7 +854,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     """A whole step from one queue (see above), every circle moved to its end at the last
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
-    -1 when the earliest event is not its partner's (an internal error).
+    -1 when the earliest event is not its partner's (an internal error); -2 when the step
+    executed more than QUEUE_MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -874,7 +880,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
             ev_t[i] = t_i
             ev_p[i] = p_i
     nb = head.shape[0]  # buckets: one per QUEUE_BUCKET_CIRCLES circles (the caller's allocation)
-    scale = ti.cast(nb / t_end, real)
+    scale = ti.min(nb / t_end, 1e30)  # float64 (see `_bucket`)
     ti.loop_config(serialize=serial)
     for i in range(n):
         where[i] = -1
@@ -891,6 +897,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                 size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n)
         cur = -1  # the last bucket poured into the heap
         executed = 0
+        # Circles jammed in a chain that spans the box, with velocities, collide without end
+        # at one instant; no physical step comes near this many events.
+        most = ti.cast(ti.min(ti.cast(n, ti.i64) * QUEUE_MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
         while True:
             while size == 0 and cur < nb - 1:
                 cur += 1
@@ -938,6 +947,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                     if ti.static(record):
                         _log(e, ids[c], p, t_offset, counters, log_t, log_i, log_j)
             executed += 1
+            if executed > most:
+                reached = -2.0
+                break
             # Only pairs with c (and p) changed. Stamps of this event: `base` for a neighbour
             # that keeps its event unless a pair with c or p comes first, base + 1 for c and p and
             # for a neighbour whose event was with c or p (it searches again in full).

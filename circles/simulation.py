@@ -523,6 +523,12 @@ class Simulation:
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
                                    self._log_j, *levels, real, periodic, record, two, self._serial)
         self.rounds += 1
+        if reached == -2:
+            raise RuntimeError(
+                f"the event step from time {self.time} executed more than {event.QUEUE_MOST_EVENTS_PER_CIRCLE} "
+                "events per circle without reaching its end: circles jammed in a chain that spans the box (touching "
+                "each other and the walls) collide without end at one instant. Give them room (a lower area "
+                "fraction, or radii that leave gaps) or use scheme='discrete'. The state is not usable after this.")
         if reached < 0:
             raise RuntimeError(f"the earliest event of the queue was not its partner's at step time {h} "
                                "(internal error)")

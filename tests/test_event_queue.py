@@ -146,6 +146,54 @@ def test_queue_calendar_any_bucket_width(circles_cpu, monkeypatch, scene):
         assert sim.cut_steps == rounds.cut_steps
 
 
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("precision,tiny", [("f32", 1e-36), ("f64", 1e-300)])
+def test_queue_step_of_1e_36_with_touching_pairs(circles_cpu, monkeypatch, precision, tiny):
+    """A first step of 1e-36 (1e-300 in float64) over 800 pairs that touch and approach at the
+    start: their collisions come at time 0 of a step whose calendar has 400 buckets, so the
+    bucket of time t is t * 400 / 1e-36, past float32's range (event._bucket works in float64
+    and clamps). Every pair collides in that step, and the queue equals the rounds bit for
+    bit, then and after 3 more steps."""
+    from circles import simulation
+
+    k, row = (a.ravel() for a in np.meshgrid(np.arange(20), np.arange(40)))
+    x = (4 * k + 1) / 16.0
+    y = (row + 0.5) / 8
+    pos = np.concatenate([np.stack([x, y], 1), np.stack([x + 1 / 16, y], 1)])  # 2 r apart
+    vel = np.concatenate([np.tile([0.5, 0.0], (800, 1)), np.tile([-0.5, 0.0], (800, 1))])
+    runs = []
+    for queue in (True, False):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        sim = circles_cpu.Simulation.from_arrays(pos, vel, np.full(1600, 1 / 32), box=(5.0, 5.0), scheme="event",
+                                                 precision=precision)
+        assert sim._head.shape[0] == (400 if queue else 1)
+        sim.advance(tiny)
+        assert sim.stats()["pair_collisions"] == 800
+        first = sim.state()
+        sim.step(3)
+        runs.append((first, sim.state()))
+    for a, b in zip(*runs):
+        assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+    assert np.all(runs[0][0].vel[:800, 0] == -0.5)  # equal masses, head on: velocities swapped
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_queue_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypatch):
+    """Three rows of three circles that fill their box exactly (each touching its neighbours and
+    the walls), moving at +0.5, 0, -0.5: no circle can move, so the collisions at time 0 never
+    end. The step stops after QUEUE_MOST_EVENTS_PER_CIRCLE events per circle with an error that
+    names the limit and the way out, instead of running for ever."""
+    from circles import event, simulation
+
+    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", True)
+    pos, vel, radius, box = lattice_head_on(3)
+    sim = circles_cpu.Simulation.from_arrays(pos, vel, 2 * radius, box=box, scheme="event", precision="f64")
+    assert sim.stats()["max_overlap"] <= 1e-12  # touching, not overlapping
+    with pytest.raises(RuntimeError, match=f"more than {event.QUEUE_MOST_EVENTS_PER_CIRCLE} events per circle.*"
+                                           "jammed.*scheme='discrete'"):
+        sim.step(1)
+
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("precision", ["f32", "f64"])
 def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, precision):
