@@ -191,15 +191,15 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
     Neighbours: those of one grid level, or of two (`_runs`).
 
     With a `queue` (heap, where, heap_t, head, nxt, prv and pending of `queue_step`, and its
-    calendar's scale and nb; else an empty tuple), `moved` holds the queue's stamps, and with `code` >= 0 i is a circle whose
-    velocity an event changed (as changed_a, and changed_b when a pair's, else a value no
-    partner has). A neighbour first met in this event (stamp below `code`) is stamped `code` + 1
-    when its event was with changed_a or changed_b (it must search again: listed in pending
-    from `pend_at` on, and counted), else `code`. Each pair with a neighbour stamped `code` is
-    offered to it: the neighbour takes the pair when it comes before its own event, and moves
-    up the queue. So a pair's time of impact is computed once for both circles. With `code`
-    < 0 nothing is stamped or offered. Returns (time, partner, queue size, neighbours listed);
-    without a queue, size comes back as given and none are listed."""
+    calendar's scale and nb; else an empty tuple), `moved` holds the queue's stamps, and with
+    `code` >= 0 i is a circle whose velocity an event changed (as changed_a, and changed_b when
+    a pair's, else a value no partner has). A neighbour first met in this event (stamp below
+    `code`) is stamped `code` + 1 when its event was with changed_a or changed_b (it must search
+    again: listed in pending from `pend_at` on, and counted), else `code`. Each pair with a
+    neighbour stamped `code` is offered to it: the neighbour takes the pair when it comes before
+    its own event, and moves up the queue. So a pair's time of impact is computed once for both
+    circles. With `code` < 0 nothing is stamped or offered. Returns (time, partner, queue size,
+    neighbours listed); without a queue, size comes back as given and none are listed."""
     n = pos.shape[0]
     size_now = size
     pending = 0
@@ -334,18 +334,25 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
 
 
 @ti.func
-def event_key(i, ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
-    """The key (time, lo, hi) of circle i's stored event: a pair's creation ids in order, a
-    wall's (id, n + wall), no event's (NEVER, n + 8, n + 8)."""
-    p = ev_p[i]
+def _tie_ids(x, ev_p: ti.template(), ids: ti.template(), n):
+    """(lo, hi): the ids part of circle x's event key (`event_key`)."""
+    p = ev_p[x]
     lo = n + 8
     hi = n + 8
     if p >= 0:
-        lo = ti.min(ids[i], ids[p])
-        hi = ti.max(ids[i], ids[p])
+        lo = ti.min(ids[x], ids[p])
+        hi = ti.max(ids[x], ids[p])
     elif p != NO_EVENT:
-        lo = ids[i]
+        lo = ids[x]
         hi = n + (-1 - p)
+    return lo, hi
+
+
+@ti.func
+def event_key(i, ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n):
+    """The key (time, lo, hi) of circle i's stored event: a pair's creation ids in order, a
+    wall's (id, n + wall), no event's (NEVER, n + 8, n + 8)."""
+    lo, hi = _tie_ids(i, ev_p, ids, n)
     return ev_t[i], lo, hi
 
 
@@ -687,21 +694,6 @@ QUEUE_BUCKET_CIRCLES = 4
 QUEUE_MOST_EVENTS_PER_CIRCLE = 10_000
 #: head[b] of a bucket already poured into the heap: its events go to the heap directly.
 POURED = -2
-
-
-@ti.func
-def _tie_ids(x, ev_p: ti.template(), ids: ti.template(), n):
-    """(lo, hi): the ids part of circle x's event key (`event_key`)."""
-    p = ev_p[x]
-    lo = n + 8
-    hi = n + 8
-    if p >= 0:
-        lo = ti.min(ids[x], ids[p])
-        hi = ti.max(ids[x], ids[p])
-    elif p != NO_EVENT:
-        lo = ids[x]
-        hi = n + (-1 - p)
-    return lo, hi
 
 
 @ti.func

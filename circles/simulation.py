@@ -519,7 +519,8 @@ class Simulation:
         # its lists' forward links.
         reached = event.queue_step(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
                                    self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
-                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial, self.wall_impulse,
+                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
+                                   self.wall_impulse,
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
                                    self._log_j, *levels, real, periodic, record, two, self._serial)
         self.rounds += 1
