@@ -704,8 +704,16 @@ def _before(x, t, y, u, ev_p: ti.template(), ids: ti.template(), n):
     if t == u:
         xl, xh = _tie_ids(x, ev_p, ids, n)
         yl, yh = _tie_ids(y, ev_p, ids, n)
-        less = xl < yl or (xl == yl and xh < yh)
+        less = key_less(t, xl, xh, u, yl, yh)
     return less
+
+
+@ti.func
+def _heap_put(k, x, t, heap: ti.template(), where: ti.template(), heap_t: ti.template()):
+    """Circle x, whose event is at time t, into heap slot k."""
+    heap[k] = x
+    heap_t[k] = t
+    where[x] = k
 
 
 @ti.func
@@ -720,15 +728,11 @@ def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template()
         parent = (k - 1) // 2
         y = heap[parent]
         if _before(x, t, y, heap_t[parent], ev_p, ids, n):
-            heap[k] = y
-            heap_t[k] = heap_t[parent]
-            where[y] = k
+            _heap_put(k, y, heap_t[parent], heap, where, heap_t)
             k = parent
         else:
             break
-    heap[k] = x
-    heap_t[k] = t
-    where[x] = k
+    _heap_put(k, x, t, heap, where, heap_t)
     return k
 
 
@@ -745,15 +749,11 @@ def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.te
             m += 1
         y = heap[m]
         if _before(y, heap_t[m], x, t, ev_p, ids, n):
-            heap[k] = y
-            heap_t[k] = heap_t[m]
-            where[y] = k
+            _heap_put(k, y, heap_t[m], heap, where, heap_t)
             k = m
         else:
             break
-    heap[k] = x
-    heap_t[k] = t
-    where[x] = k
+    _heap_put(k, x, t, heap, where, heap_t)
 
 
 @ti.func
@@ -898,9 +898,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                 x = head[cur]
                 head[cur] = POURED
                 while x >= 0:
-                    heap[size] = x
-                    heap_t[size] = ev_t[x]
-                    where[x] = size
+                    _heap_put(size, x, ev_t[x], heap, where, heap_t)
                     size += 1
                     x = nxt[x]
                 k = size // 2 - 1
