@@ -689,9 +689,10 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 
 #: Circles per bucket of the queue's calendar (see above).
 QUEUE_BUCKET_CIRCLES = 4
-#: A step that executes more events than this per circle (at most 2**30 in all) stops with an
-#: error: circles jammed in a chain across the box collide without end at one instant.
-QUEUE_MOST_EVENTS_PER_CIRCLE = 10_000
+#: A step that executes more events than this per circle (the queue: at most 2**30 in all) stops
+#: with an error, on the queue and in the rounds: circles jammed in a chain across the box
+#: collide without end at one instant.
+MOST_EVENTS_PER_CIRCLE = 10_000
 #: head[b] of a bucket already poured into the heap: its events go to the heap directly.
 POURED = -2
 
@@ -847,7 +848,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
     -1 when the earliest event is not its partner's (an internal error); -2 when the step
-    executed more than QUEUE_MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
+    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -891,7 +892,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         executed = 0
         # Circles jammed in a chain that spans the box, with velocities, collide without end
         # at one instant; no physical step comes near this many events.
-        most = ti.cast(ti.min(ti.cast(n, ti.i64) * QUEUE_MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
+        most = ti.cast(ti.min(ti.cast(n, ti.i64) * MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
         while True:
             while size == 0 and cur < nb - 1:
                 cur += 1

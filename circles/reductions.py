@@ -138,6 +138,18 @@ def permute_state(order: ndarr, pos: ndarr, vel: ndarr, radius: ndarr, inv_mass:
 
 
 @launch.kernel
+def events_since(pair_count: ndarr, wall_count: ndarr, pair_before: ndarr, wall_before: ndarr) -> ti.i64:
+    """Events (collisions and wall hits) the per-circle counts have gained since the copies
+    `*_before` were taken: each collision counts once, although both its circles count it."""
+    pairs = ti.cast(0, ti.i64)
+    walls = ti.cast(0, ti.i64)
+    for i in range(pair_count.shape[0]):
+        pairs += ti.cast(pair_count[i] - pair_before[i], ti.i64)
+        walls += ti.cast(wall_count[i] - wall_before[i], ti.i64)
+    return pairs // 2 + walls
+
+
+@launch.kernel
 def fill_i32(dst: ndarr, value: ti.i32):
     for i in range(dst.shape[0]):
         dst[i] = value

@@ -44,6 +44,10 @@ DISCRETE_PARALLEL_ROUNDS = 4
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
 #: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
 EVENT_QUEUE_ON_CPU = True
+#: Rounds of one event step after which (and after twice as many, and so on) the events it
+#: executed are counted: more than event.MOST_EVENTS_PER_CIRCLE per circle stop it with an
+#: error (jammed circles), as on the queue. A step takes about ten rounds.
+JAM_CHECK_ROUNDS = 64
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
 #: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
@@ -453,6 +457,9 @@ class Simulation:
                          self._dirty, self._moved, self._scalars, real, self._serial)
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         t_end = h
+        # A step that can end takes a few rounds; from JAM_CHECK_ROUNDS rounds on (and at every
+        # doubling) its events so far are counted, and a jam stops it as on the queue.
+        rounds, check = 0, JAM_CHECK_ROUNDS
         sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
         while True:
             tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
@@ -475,6 +482,12 @@ class Simulation:
                                      self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
                                      periodic, record)
             self.rounds += 1
+            rounds += 1
+            if rounds == check:
+                check *= 2
+                events = reductions.events_since(self.pair_count, self.wall_count, b["pair_count"], b["wall_count"])
+                if events > event.MOST_EVENTS_PER_CIRCLE * self.n:
+                    raise self._jammed()
             if executed < 0:
                 # A collision would outrun the grid: redo the step up to it (see circles.event).
                 # The redo may meet an earlier such collision and be redone again: one cut step.
@@ -525,17 +538,22 @@ class Simulation:
                                    self._log_j, *levels, real, periodic, record, two, self._serial)
         self.rounds += 1
         if reached == -2:
-            raise RuntimeError(
-                f"the event step from time {self.time} executed more than {event.QUEUE_MOST_EVENTS_PER_CIRCLE} "
-                "events per circle without reaching its end: circles jammed in a chain that spans the box (touching "
-                "each other and the walls) collide without end at one instant. Give them room (a lower area "
-                "fraction, or radii that leave gaps) or use scheme='discrete'. The state is not usable after this.")
+            raise self._jammed()
         if reached < 0:
             raise RuntimeError(f"the earliest event of the queue was not its partner's at step time {h} "
                                "(internal error)")
         if reached != h:
             self.cut_steps += 1
         return reached
+
+    def _jammed(self):
+        """The error of an event step that executed more than event.MOST_EVENTS_PER_CIRCLE events
+        per circle."""
+        return RuntimeError(
+            f"the event step from time {self.time} executed more than {event.MOST_EVENTS_PER_CIRCLE} "
+            "events per circle without reaching its end: circles jammed in a chain that spans the box (touching "
+            "each other and the walls) collide without end at one instant. Give them room (a lower area "
+            "fraction, or radii that leave gaps) or use scheme='discrete'. The state is not usable after this.")
 
     def _redo(self, log_count):
         """Restore the state at the step's start for a step cut short at the collision that would
