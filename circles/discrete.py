@@ -30,7 +30,7 @@ import taichi as ti
 from . import launch
 from .geometry import (NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, run_parts,
                        wide_row)
-from .grid import enter_cell, finish_cells
+from .grid import enter_cells, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -44,34 +44,46 @@ R_CUT, R_MAX = 0, 1
 
 
 @ti.func
+def _moved(i, a: ti.template()):
+    """Where circle i is after its move by v dt (wrapped into the box when periodic); a circle
+    that ends up reaching past a wall is listed in `walled`. a = (pos, vel, radius, n_contacts,
+    walled, work, h, box_w, box_h, real, periodic)."""
+    box = ti.Vector([a[7], a[8]], dt=a[9])
+    x = a[0][i] + a[1][i] * a[6]
+    if ti.static(a[10]):
+        x -= box * ti.floor(x / box)
+        for k in ti.static(range(2)):
+            if x[k] >= box[k]:
+                x[k] -= box[k]
+    else:
+        r = a[2][i]
+        if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
+            a[4][ti.atomic_add(a[5][WALLED], 1)] = i
+    return x
+
+
+@ti.func
+def _keep_moved(i, x, a: ti.template()):
+    """The stores of circle i's move to x: its position, and its contact list emptied."""
+    a[0][i] = x
+    a[3][i] = 0
+
+
+@ti.func
 def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_contacts: ti.template(),
           walled: ti.template(), work: ti.template(), cell_of: ti.template(), slot: ti.template(),
-          cell_count: ti.template(), ncx, ncy, inv_cw, inv_ch, dt, box_w, box_h, real: ti.template(),
-          periodic: ti.template(), serial: ti.template()):
+          cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy, inv_cw, inv_ch, dt, box_w,
+          box_h, real: ti.template(), periodic: ti.template(), serial: ti.template()):
     """x += v dt (wrapped into the box when periodic), counted into its grid cell; contact lists
-    emptied in the same pass.
+    emptied in the same pass (see grid.enter_cells).
 
     In a walled box the circles that end up reaching past a wall are listed in `walled`
     (work[WALLED] of them): only they can need a wall reflection at the end of the step.
     """
-    h = ti.cast(dt, real)
     work[WALLED] = 0
-    ti.loop_config(serialize=serial)
-    for i in range(pos.shape[0]):
-        box = ti.Vector([box_w, box_h], dt=real)
-        n_contacts[i] = 0
-        x = pos[i] + vel[i] * h
-        if ti.static(periodic):
-            x -= box * ti.floor(x / box)
-            for a in ti.static(range(2)):
-                if x[a] >= box[a]:
-                    x[a] -= box[a]
-        else:
-            r = radius[i]
-            if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
-                walled[ti.atomic_add(work[WALLED], 1)] = i
-        pos[i] = x
-        enter_cell(i, x, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
+    enter_cells(pos.shape[0], _moved, _keep_moved,
+                (pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real, periodic),
+                cell_of, slot, cell_count, stray, parts, ncx, ncy, inv_cw, inv_ch, real, periodic, serial)
 
 
 @ti.func
@@ -558,7 +570,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
-               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr,
+               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
                real: ti.template(), periodic: ti.template(), two_level: ti.template(),
                rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
@@ -567,8 +579,8 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     rounds are needed (the walls wait for them)."""
     # serial_from = 0: the whole step on one thread (see backend.SERIAL_N).
     serial = ti.static(serial_from == 0)
-    _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, dt,
-          box_w, box_h, real, periodic, serial)
+    _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
+          inv_ch, dt, box_w, box_h, real, periodic, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, serial)

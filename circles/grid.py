@@ -72,18 +72,144 @@ def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template
 
 
 @ti.func
-def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), ncx, ncy, inv_cw,
-               inv_ch, periodic: ti.template()):
-    """Count circle i, at p, into its cell (the first stage, for a scheme to fuse into its own pass)."""
+def cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic: ti.template()):
+    """The cell of a circle at p."""
     # Positions may sit a round-off outside the box (or outside [0, W) in a
     # periodic box before wrapping): clamp and wrap the cell coordinates.
     cx = ti.cast(ti.floor(ti.cast(p[0], ti.f64) * inv_cw), ti.i32)
     cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
     cx = ti.min(ti.max(cx, 0), ncx - 1)
     cy = ti.min(ti.max(cy, 0), ncy - 1)
-    c = cell_index(cx, cy, ncx, periodic)
+    return cell_index(cx, cy, ncx, periodic)
+
+
+@ti.func
+def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), ncx, ncy, inv_cw,
+               inv_ch, periodic: ti.template()):
+    """Count circle i, at p, into its cell with an atomic add."""
+    c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
     cell_of[i] = c
     slot[i] = ti.atomic_add(cell_count[c], 1)
+
+
+#: Iterations of the loop over a CPU's parts in `enter_cells` per part: Taichi (1.7) cuts a
+#: parallel loop of m iterations on T threads into T tasks of max(m / T, 512) iterations each,
+#: so a loop of 512 T iterations gives each thread one task, whose first iteration counts one
+#: part. Another cut would only run the parts on fewer threads.
+PART_ITERATIONS = 512
+#: Circles that `enter_cells` takes at a time on a CPU: their loads first, then their stores.
+CPU_GROUP = 8
+
+
+def count_parts() -> int:
+    """Parts of the circles' range that `enter_cells` counts without atomics: one per CPU
+    thread; 0 on a GPU, which counts with an atomic add per circle (read when a kernel compiles)."""
+    cfg = ti.lang.impl.current_cfg()
+    return max(int(cfg.cpu_max_num_threads), 1) if cfg.arch in (ti.x64, ti.arm64) else 0
+
+
+@ti.func
+def _part_range(n, k, parts):
+    """The circles [lo, hi) of part k of `parts`."""
+    lo = ti.cast(ti.cast(n, ti.i64) * k // parts, ti.i32)
+    hi = ti.cast(ti.cast(n, ti.i64) * (k + 1) // parts, ti.i32)
+    return lo, hi
+
+
+@ti.func
+def _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count: ti.template(), slot: ti.template(),
+                 stray: ti.template()):
+    """Circle i of a part (from lo) counted into cell c with a plain add when the part owns c,
+    else set aside as the part's next stray; returns the part's strays."""
+    if own_lo <= c and c < own_hi:
+        s = cell_count[c]
+        cell_count[c] = s + 1
+        slot[i] = s
+    else:
+        stray[lo + strays] = i
+        strays += 1
+    return strays
+
+
+@ti.func
+def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(), cell_of: ti.template(),
+                slot: ti.template(), cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy,
+                inv_cw, inv_ch, real: ti.template(), periodic: ti.template(), serial: ti.template()):
+    """The first stage for every circle i < n, fused into a scheme's own pass (such as a move):
+    p = place(i, args) says where circle i is (it must store nothing but rarely), keep(i, p,
+    args) stores what the pass stores for it, and the grid gets its cell in cell_of[i] and its
+    slot in the cell.
+
+    On a GPU: one atomic add per circle. On a CPU two things made such a pass slow: an atomic
+    add drains the core's pending stores, and Taichi reloads an array's address after every
+    store (see circles/loops.py), so a load that follows a store waits. There the circles'
+    range is cut into one part per thread (`count_parts`), and each thread counts its part
+    with plain adds into the cells it owns, CPU_GROUP circles at a time: their loads and
+    arithmetic first, then their stores, then their counts. Part k owns the cells from the
+    cell its first circle had at the last count up to part k + 1's: about the cells of its
+    circles, which are kept in cell order. A circle in a cell that another part owns (near the
+    parts' border, or far from where the last reorder left it) is set aside as a stray (in
+    `stray`, which the scatter overwrites later, at lo_k + its rank) and counted after all
+    parts, on one thread. The slots then do not depend on thread timing. `parts` holds the
+    owned ranges' starts (count_parts() + 1 entries) and each part's number of strays
+    (count_parts() more); any cell_of on entry is valid, a poor one only makes more strays.
+    """
+    np_ = ti.static(count_parts())
+    if ti.static(np_ == 0):
+        ti.loop_config(serialize=serial)
+        for i in range(n):
+            p = place(i, args)
+            keep(i, p, args)
+            enter_cell(i, p, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
+    else:
+        ncells = cells_in(ncx, ncy, periodic)
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            parts[0] = 0
+            for k in range(1, np_):
+                lo, _hi = _part_range(n, k, np_)
+                parts[k] = ti.max(parts[k - 1], ti.min(ti.max(cell_of[lo], 0), ncells))
+            parts[np_] = ncells
+        g = ti.static(CPU_GROUP)
+        ti.loop_config(serialize=serial)
+        for it in range(np_ * PART_ITERATIONS):
+            if it % PART_ITERATIONS == 0:
+                k = it // PART_ITERATIONS
+                lo, hi = _part_range(n, k, np_)
+                own_lo = parts[k]
+                own_hi = parts[k + 1]
+                strays = 0
+                for q in range((hi - lo) // g):
+                    first = lo + q * g
+                    ps = ti.Matrix.zero(real, g, 2)
+                    cs = ti.Vector.zero(ti.i32, g)
+                    for u in ti.static(range(g)):
+                        p = place(first + u, args)
+                        ps[u, 0] = p[0]
+                        ps[u, 1] = p[1]
+                        cs[u] = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+                    for u in ti.static(range(g)):
+                        keep(first + u, ti.Vector([ps[u, 0], ps[u, 1]], dt=real), args)
+                    for u in ti.static(range(g)):
+                        cell_of[first + u] = cs[u]
+                    for u in ti.static(range(g)):
+                        strays = _count_owned(first + u, cs[u], own_lo, own_hi, lo, strays, cell_count, slot, stray)
+                for i in range(lo + (hi - lo) // g * g, hi):
+                    p = place(i, args)
+                    keep(i, p, args)
+                    c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+                    cell_of[i] = c
+                    strays = _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count, slot, stray)
+                parts[np_ + 1 + k] = strays
+        ti.loop_config(serialize=True)
+        for k in range(np_):
+            lo, _hi = _part_range(n, k, np_)
+            for m in range(parts[np_ + 1 + k]):
+                i = stray[lo + m]
+                c = cell_of[i]
+                s = cell_count[c]
+                cell_count[c] = s + 1
+                slot[i] = s
 
 
 @ti.func
@@ -296,6 +422,8 @@ class Grid:
         self.cell_count.fill(0)
         self.cell_start = ti.ndarray(ti.i32, shape=self.max_cells + 1)
         self._dummy_mask = ti.ndarray(ti.i32, shape=1)
+        # The owned cell ranges and stray counts of a CPU's count (see `enter_cells`).
+        self.parts = ti.ndarray(ti.i32, shape=2 * count_parts() + 1)
         self.ncx = self.ncy = 1
         self.reach = 0.0
         self._shapes = {}  # reach -> (ncx, ncy): most steps ask for the reach of the step before

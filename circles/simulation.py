@@ -579,7 +579,8 @@ class Simulation:
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
         two = self._two_level
         parallel = self._parallel_rounds
-        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, real, periodic, two,
+        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
+                                   real, periodic, two,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
