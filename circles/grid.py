@@ -50,24 +50,37 @@ WARP = 32
 
 
 @ti.func
+def _position(i, a: ti.template()):
+    """Circle i's stored position: a = (pos,)."""
+    return a[0][i]
+
+
+@ti.func
+def _keep_nothing(i, p, a: ti.template()):
+    """A grid build's pass stores nothing of its own."""
+
+
+@ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
-                cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, inv_cw,
-                inv_ch, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
+                cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), parts: ti.template(),
+                ncx, ncy, inv_cw, inv_ch, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
     """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel;
-    with `serial`, every loop on one thread (see backend.SERIAL_N).
+    with `serial`, every loop on one thread (see backend.SERIAL_N). Masked (circles whose
+    `include` is 0 left out, cell_of -1): an atomic add per circle, as on a GPU.
 
     `cell_count` must be all zero on entry; it is left all zero (each chunk clears its counts
     once it has turned them into starts), so no pass clears it.
     """
-    ti.loop_config(serialize=serial)
-    for i in range(pos.shape[0]):
-        use = True
-        if ti.static(masked):
-            use = include[i] != 0
-        if use:
-            enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
-        else:
-            cell_of[i] = -1
+    if ti.static(masked):
+        ti.loop_config(serialize=serial)
+        for i in range(pos.shape[0]):
+            if include[i] != 0:
+                enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
+            else:
+                cell_of[i] = -1
+    else:
+        enter_cells(pos.shape[0], _position, _keep_nothing, (pos,), cell_of, slot, cell_count, sorted_ids, parts, ncx,
+                    ncy, inv_cw, inv_ch, ti.f64, periodic, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
 
 
@@ -218,7 +231,25 @@ def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.tem
     """The stages after counting: cell starts, then ids scattered into their slots; with
     `serial`, every loop on one thread (see backend.SERIAL_N)."""
     prefix_sum(cell_count, cell_start, cells_in(ncx, ncy, periodic), serial)
-    each(cell_of.shape[0], _scatter, (cell_of, slot, cell_start, sorted_ids), serial)
+    if ti.static(count_parts() == 0):
+        each(cell_of.shape[0], _scatter, (cell_of, slot, cell_start, sorted_ids), serial)
+    else:
+        # CPU_GROUP circles at a time, their loads before their stores (see `enter_cells`).
+        g = ti.static(CPU_GROUP)
+        n = cell_of.shape[0]
+        ti.loop_config(serialize=serial)
+        for q in range((n + g - 1) // g):
+            at = ti.Vector.zero(ti.i32, g)
+            for u in ti.static(range(g)):
+                i = q * g + u
+                at[u] = -1
+                if i < n:
+                    c = cell_of[i]
+                    if c >= 0:
+                        at[u] = cell_start[c] + slot[i]
+            for u in ti.static(range(g)):
+                if at[u] >= 0:
+                    sorted_ids[at[u]] = q * g + u
 
 
 @ti.func
@@ -399,10 +430,11 @@ def _warp_fill_starts(count: ti.template(), start: ti.template(), ncells, nchunk
 @launch.kernel
 def _build(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cell_of: ti.types.ndarray(ndim=1),
            slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1),
-           cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32,
-           inv_cw: ti.f64, inv_ch: ti.f64, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
-    build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, inv_cw, inv_ch, masked,
-                periodic, serial)
+           cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1),
+           parts: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64,
+           masked: ti.template(), periodic: ti.template(), serial: ti.template()):
+    build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, parts, ncx, ncy, inv_cw, inv_ch,
+                masked, periodic, serial)
 
 
 class Grid:
@@ -457,9 +489,10 @@ class Grid:
 
     def build(self, pos, reach, include=None):
         """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""
-        mask, *rest = self.prepare(reach)
+        mask, cell_of, slot, cell_count, cell_start, sorted_ids, *shape = self.prepare(reach)
         masked = include is not None
-        _build(pos, include if masked else mask, *rest, masked, self.periodic, self.serial)
+        _build(pos, include if masked else mask, cell_of, slot, cell_count, cell_start, sorted_ids, self.parts, *shape,
+               masked, self.periodic, self.serial)
 
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""

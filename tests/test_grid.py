@@ -79,6 +79,45 @@ def test_cells_list_every_circle_once(circles_cpu):
         assert (cell_of[sorted_ids[cell_start[c]:cell_start[c + 1]]] == c).all()
 
 
+@pytest.mark.parametrize("serial", [False, True])
+def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
+    """A CPU counts circles into cells in parts without atomics (grid.enter_cells): each part
+    owns the cells from where its first circle was at the last count, and circles in cells
+    that another part owns are counted afterwards as strays. Whatever cell_of holds on entry
+    (left over from other positions, or garbage), the cells must list every circle once, in
+    its own cell; circles in cell order must leave few strays (the point of the parts)."""
+    rng = np.random.default_rng(11)
+    n, box = 20_003, (120.0, 70.0)  # not a multiple of the group of 8 circles
+    g = grid.Grid(n, box, periodic=False, serial=serial)
+    pos = ti.Vector.ndarray(2, ti.f64, shape=n)
+
+    def check(p):
+        pos.from_numpy(p)
+        g.build(pos, 1.0)
+        cell_of, cell_start, sorted_ids = g.cells_numpy()
+        cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
+        cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
+        expected = (cy + 1) * (g.ncx + 1) + cx + 1
+        ncells = (g.ncy + 2) * (g.ncx + 1) + 1
+        assert np.array_equal(cell_of, expected)
+        assert np.array_equal(np.sort(sorted_ids), np.arange(n))
+        assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=ncells))
+        assert (cell_of[sorted_ids] == np.repeat(np.arange(ncells), np.diff(cell_start))).all()
+        parts = grid.count_parts()
+        return int(g.parts.to_numpy()[parts + 1:].sum()) if parts else 0
+
+    scattered = rng.uniform((0, 0), box, (n, 2))
+    check(scattered)  # a fresh grid: cell_of as allocated
+    garbage = rng.integers(-10**9, 10**9, n).astype(np.int32)
+    g.cell_of.from_numpy(garbage)
+    check(scattered)
+    cy = np.floor(scattered[:, 1] * g.ncy / box[1])
+    ordered = scattered[np.lexsort((scattered[:, 0], cy))]
+    check(ordered)  # the parts' cells now come from the ordered positions
+    strays = check(ordered + rng.uniform(-0.05, 0.05, (n, 2)).clip(-ordered, np.array(box) - ordered - 1e-9))
+    assert strays <= 0.01 * n
+
+
 @pytest.mark.parametrize("periodic", [False, True])
 @pytest.mark.parametrize("box", [(40.0, 25.0), (2.5, 7.0), (1.0, 1.0)])
 def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
