@@ -182,21 +182,30 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
     d = displacement(pos[lo], pos[hi], box, periodic)
     s = radius[lo] + radius[hi]
     if d.dot(d) < s * s:
-        # Other threads add to the same lists: atomic counts. The order in a list follows thread
-        # timing, which no pick depends on (keys break ties by ids); a count above the capacity
-        # sends the circle back to searching its cells.
-        a = ti.atomic_add(n_contacts[i], 1)
-        if a < contacts.shape[0]:
-            contacts[a, i] = j
-        b = ti.atomic_add(n_contacts[j], 1)
-        if b < contacts.shape[0]:
-            contacts[b, j] = i
-        # Approaching: the sign of the normal speed `_consider` divides by the distance. A pair
-        # whose quotient rounds to -0 is listed too; listing more circles changes no pick.
-        if (vel[hi] - vel[lo]).dot(d) < 0:
-            # Every thread that marks a circle here writes the same number: plain stores.
-            marked[i] = rnd
-            marked[j] = rnd
+        _record_overlap(i, j, d * (1 if i == lo else -1), vel, contacts, n_contacts, marked, rnd)
+
+
+@ti.func
+def _record_overlap(i, j, d, vel: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+                    marked: ti.template(), rnd):
+    """`_record_contact` of a pair found overlapping, d = x_j - x_i. (A difference of two floats
+    is exactly the negated difference the other way, and the products and sums below are the
+    same for either sign, so the outcome does not depend on which circle is i.)"""
+    # Other threads add to the same lists: atomic counts. The order in a list follows thread
+    # timing, which no pick depends on (keys break ties by ids); a count above the capacity
+    # sends the circle back to searching its cells.
+    a = ti.atomic_add(n_contacts[i], 1)
+    if a < contacts.shape[0]:
+        contacts[a, i] = j
+    b = ti.atomic_add(n_contacts[j], 1)
+    if b < contacts.shape[0]:
+        contacts[b, j] = i
+    # Approaching: the sign of the normal speed `_consider` divides by the distance. A pair
+    # whose quotient rounds to -0 is listed too; listing more circles changes no pick.
+    if (vel[j] - vel[i]).dot(d) < 0:
+        # Every thread that marks a circle here writes the same number: plain stores.
+        marked[i] = rnd
+        marked[j] = rnd
 
 
 @ti.func
@@ -238,12 +247,18 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             count = n_a + b_hi - b_lo
             if is_large(i, radius, spread, two_level):
                 count = 0  # no forward search: its pairs come from its block, below
+            # i's own values read once (a walled box: no images), each neighbour's straight
+            # from its slot, with no min and max of the two before the loads.
+            xi = pos[i]
+            ri = radius[i]
             for m in range(count):
                 k = own + 1 + m if m < n_a else b_lo + m - n_a
                 j = sorted_ids[k]
                 if not is_large(j, radius, spread, two_level):
-                    _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
-                                    periodic)
+                    d = pos[j] - xi
+                    s = ri + radius[j]
+                    if d.dot(d) < s * s:
+                        _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
         else:
             pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
                        (pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box, periodic))

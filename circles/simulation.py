@@ -365,7 +365,7 @@ class Simulation:
 
         Results do not depend on the memory order: event keys and the owners of per-circle
         sums are creation ids, and pair arithmetic is symmetric in the two circles. So the
-        order inside a cell may follow thread timing (the grid's atomic slots) without
+        order inside a cell may follow thread timing (a GPU grid's atomic slots) without
         changing the state.
         """
         self.grid.build(self.pos, 2.0 * self._rmax)
