@@ -8,7 +8,8 @@ unrolled by 16 with its 16 loads before its 16 stores, the package's `circles.lo
 compiled to take 1, 8 (the package's `loops.CPU_UNROLL`) and 16 items per iteration on all
 threads and on one, a read-only Taichi loop (a sum), and numpy's copy. Then the grid count
 of a discrete step alone (1e6 circles in cell order: the cell of each, counted into its cell
-with an atomic add) against the same pass that only writes the cell.
+with an atomic add, or as the grid counts on a CPU, `grid.enter_cells`) against the same pass
+that only writes the cell.
 
 Taichi's generated loop reads each array's data pointer from the kernel's argument buffer
 at every access; after a store, which might alias that buffer, it reads it again, and a
@@ -22,7 +23,7 @@ import time
 import numpy as np
 import taichi as ti
 
-from circles import loops, reductions
+from circles import grid, loops, reductions
 
 nd = ti.types.ndarray(ndim=1)
 
@@ -75,6 +76,14 @@ def cell_and_count(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: 
         c = cy * ncx + cx
         cell_of[i] = c
         slot[i] = ti.atomic_add(count[c], 1)
+
+
+@ti.kernel
+def cell_in_parts(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: nd, stray: nd, parts: nd, ncx: ti.i32,
+                  ncy: ti.i32):
+    """The grid build's count on a CPU (`grid.enter_cells` with the build's own position reader)."""
+    grid.enter_cells(pos.shape[0], grid._position, grid._keep_nothing, (pos,), cell_of, slot, count, stray, parts, ncx,
+                     ncy, ti.cast(ncx, ti.f64), ti.cast(ncy, ti.f64), ti.f32, True, False)
 
 
 def each_copy(items, serial, src, dst):
@@ -143,12 +152,19 @@ def main():
     cell_of = ti.ndarray(ti.i32, circles)
     slot = ti.ndarray(ti.i32, circles)
     count = ti.ndarray(ti.i32, ncx * ncy)
+    stray = ti.ndarray(ti.i32, circles)
+    parts = ti.ndarray(ti.i32, 2 * grid.count_parts() + 1)
     only = best_of(args.reps, lambda: cell_only(pos, cell_of, ncx, ncy))
     counted = best_of(args.reps, lambda: cell_and_count(pos, cell_of, slot, count, ncx, ncy),
                       before=lambda: count.fill(0))
+    # cell_of holds this order's cells from the passes above, as a step's count finds them.
+    in_parts = best_of(args.reps, lambda: cell_in_parts(pos, cell_of, slot, count, stray, parts, ncx, ncy),
+                       before=lambda: count.fill(0))
     print(f"grid pass over {circles} circles in cell order, all threads, best of {args.reps}:")
     print(f"  cell of each circle only      {only * 1e3:6.2f} ms")
-    print(f"  and counted into its cell     {counted * 1e3:6.2f} ms")
+    print(f"  and counted into its cell     {counted * 1e3:6.2f} ms (an atomic add per circle)")
+    print(f"  counted in parts (the grid's) {in_parts * 1e3:6.2f} ms (grid.enter_cells: plain adds, "
+          f"{grid.CPU_GROUP} circles at a time)")
 
 
 if __name__ == "__main__":

@@ -57,6 +57,22 @@ def check_prefix_sum(chunk, group, ncells, serial):
     assert (count[ncells:] == 7).all() and (start[ncells + 1:] == -5).all()  # ... and nothing past them is touched
 
 
+def check_walled_cells(g, p, box):
+    """The cells of grid g, built on positions p in a walled box, list every circle once, in its
+    own cell."""
+    cell_of, cell_start, sorted_ids = g.cells_numpy()
+    cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
+    cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
+    # Walled layout: rows of ncx + 1 cells, the first of each empty, an empty row below and above.
+    expected = (cy + 1) * (g.ncx + 1) + cx + 1
+    ncells = (g.ncy + 2) * (g.ncx + 1) + 1
+    assert np.array_equal(cell_of, expected)
+    assert np.array_equal(np.sort(sorted_ids), np.arange(len(p)))
+    assert len(cell_start) == ncells + 1
+    assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=ncells))
+    assert (cell_of[sorted_ids] == np.repeat(np.arange(ncells), np.diff(cell_start))).all()
+
+
 def test_cells_list_every_circle_once(circles_cpu):
     rng = np.random.default_rng(5)
     n, box = 5000, (40.0, 25.0)
@@ -65,18 +81,7 @@ def test_cells_list_every_circle_once(circles_cpu):
     pos.from_numpy(p)
     g = grid.Grid(n, box, periodic=False)
     g.build(pos, 1.0)
-    cell_of, cell_start, sorted_ids = g.cells_numpy()
-    cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
-    cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
-    # Walled layout: rows of ncx + 1 cells, the first of each empty, an empty row below and above.
-    expected = (cy + 1) * (g.ncx + 1) + cx + 1
-    ncells = (g.ncy + 2) * (g.ncx + 1) + 1
-    assert np.array_equal(cell_of, expected)
-    assert np.array_equal(np.sort(sorted_ids), np.arange(n))
-    assert len(cell_start) == ncells + 1
-    assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=ncells))
-    for c in rng.integers(0, ncells, 200):
-        assert (cell_of[sorted_ids[cell_start[c]:cell_start[c + 1]]] == c).all()
+    check_walled_cells(g, p, box)
 
 
 @pytest.mark.parametrize("serial", [False, True])
@@ -94,15 +99,7 @@ def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
     def check(p):
         pos.from_numpy(p)
         g.build(pos, 1.0)
-        cell_of, cell_start, sorted_ids = g.cells_numpy()
-        cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
-        cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
-        expected = (cy + 1) * (g.ncx + 1) + cx + 1
-        ncells = (g.ncy + 2) * (g.ncx + 1) + 1
-        assert np.array_equal(cell_of, expected)
-        assert np.array_equal(np.sort(sorted_ids), np.arange(n))
-        assert np.array_equal(np.diff(cell_start), np.bincount(expected, minlength=ncells))
-        assert (cell_of[sorted_ids] == np.repeat(np.arange(ncells), np.diff(cell_start))).all()
+        check_walled_cells(g, p, box)
         parts = grid.count_parts()
         return int(g.parts.to_numpy()[parts + 1:].sum()) if parts else 0
 
