@@ -1,11 +1,12 @@
 """Uniform-grid broadphase rebuilt by counting sort.
 
-Stages: cell index and slot of each circle (one atomic add per circle), prefix sum of the
+Stages: cell index and slot of each circle (on a GPU one atomic add per circle, on a CPU
+plain adds in one part of the circles per thread, see `enter_cells`), prefix sum of the
 counts (in chunks and groups of chunks, see `prefix_sum`), scatter of ids into `sorted_ids`.
 `cell_start[c]:cell_start[c+1]` then lists the circles of cell c, numbered as
 `geometry.cell_index` says (in a walled box inside a frame of empty cells, so that
-neighbouring cells are at fixed offsets with no edge tests). The slot order inside a
-cell depends on thread timing; nothing that feeds the state may depend on it, and nothing
+neighbouring cells are at fixed offsets with no edge tests). On a GPU the slot order inside
+a cell depends on thread timing; nothing that feeds the state may depend on it, and nothing
 does (see geometry.key_less).
 
 The cell side is at least the requested reach, so the 3 x 3 block around a circle's cell
