@@ -115,6 +115,32 @@ def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
     assert strays <= 0.01 * n
 
 
+def test_cells_counted_with_atomics_as_on_a_gpu(circles_cpu, monkeypatch):
+    """A GPU counts circles into cells with an atomic add each (grid.enter_cells without parts)
+    and scatters them one per thread: that branch, compiled here on the CPU into a kernel of
+    its own (count_parts is read when a kernel compiles), lists every circle once, in its own
+    cell."""
+    monkeypatch.setattr(grid, "count_parts", lambda: 0)
+    nd = ti.types.ndarray(ndim=1)
+
+    @ti.kernel
+    def build(pos: nd, cell_of: nd, slot: nd, count: nd, start: nd, sorted_ids: nd, parts: nd, ncx: ti.i32,
+              ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64):
+        grid.build_cells(pos, parts, cell_of, slot, count, start, sorted_ids, parts, ncx, ncy, inv_cw, inv_ch, False,
+                         False, False)
+
+    rng = np.random.default_rng(12)
+    n, box = 7001, (60.0, 35.0)
+    p = rng.uniform((0, 0), box, (n, 2))
+    g = grid.Grid(n, box, periodic=False)
+    pos = ti.Vector.ndarray(2, ti.f64, shape=n)
+    pos.from_numpy(p)
+    _, cell_of, slot, count, start, sorted_ids, ncx, ncy, inv_cw, inv_ch = g.prepare(1.0)
+    assert g.parts.shape == (1,)  # sized by the patched count_parts: no parts
+    build(pos, cell_of, slot, count, start, sorted_ids, g.parts, ncx, ncy, inv_cw, inv_ch)
+    check_walled_cells(g, p, box)
+
+
 @pytest.mark.parametrize("periodic", [False, True])
 @pytest.mark.parametrize("box", [(40.0, 25.0), (2.5, 7.0), (1.0, 1.0)])
 def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
