@@ -182,7 +182,7 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
     d = displacement(pos[lo], pos[hi], box, periodic)
     s = radius[lo] + radius[hi]
     if d.dot(d) < s * s:
-        _record_overlap(i, j, d * (1 if i == lo else -1), vel, contacts, n_contacts, marked, rnd)
+        _record_overlap(lo, hi, d, vel, contacts, n_contacts, marked, rnd)
 
 
 @ti.func

@@ -131,14 +131,20 @@ def _part_range(n, k, parts):
 
 
 @ti.func
+def _count_plain(i, c, cell_count: ti.template(), slot: ti.template()):
+    """Circle i counted into cell c with a plain add (by the one thread that counts c)."""
+    s = cell_count[c]
+    cell_count[c] = s + 1
+    slot[i] = s
+
+
+@ti.func
 def _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count: ti.template(), slot: ti.template(),
                  stray: ti.template()):
     """Circle i of a part (from lo) counted into cell c with a plain add when the part owns c,
     else set aside as the part's next stray; returns the part's strays."""
     if own_lo <= c and c < own_hi:
-        s = cell_count[c]
-        cell_count[c] = s + 1
-        slot[i] = s
+        _count_plain(i, c, cell_count, slot)
     else:
         stray[lo + strays] = i
         strays += 1
@@ -220,10 +226,7 @@ def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(
             lo, _hi = _part_range(n, k, np_)
             for m in range(parts[np_ + 1 + k]):
                 i = stray[lo + m]
-                c = cell_of[i]
-                s = cell_count[c]
-                cell_count[c] = s + 1
-                slot[i] = s
+                _count_plain(i, cell_of[i], cell_count, slot)
 
 
 @ti.func

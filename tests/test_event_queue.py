@@ -146,7 +146,6 @@ def test_queue_calendar_any_bucket_width(circles_cpu, monkeypatch, scene):
         assert sim.cut_steps == rounds.cut_steps
 
 
-
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("precision,tiny", [("f32", 1e-36), ("f64", 1e-300)])
 def test_queue_step_of_1e_36_with_touching_pairs(circles_cpu, monkeypatch, precision, tiny):
