@@ -359,8 +359,15 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
                         j = sorted_ids[k]
                         if j != i:
                             best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
-            partner[i] = best_p
-            picked[i] = work[ROUND]
+            # In the first round a circle that picked no partner (one of an isolated pair, or
+            # one with no approaching overlap: most of them) writes nothing. That round's resolve
+            # takes only circles whose `picked` is the round, and no circle picks it then. A
+            # later round can pick it only after a resolution changed its velocity (which
+            # writes its pick) or that of a circle it overlaps (which lists it to pick again).
+            # Half the stores of the pass, and the resolve reads no partner it does not use.
+            if not ti.static(every) or best_p >= 0:
+                partner[i] = best_p
+                picked[i] = work[ROUND]
 
 
 @ti.func
