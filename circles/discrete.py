@@ -38,6 +38,9 @@ ndarr = ti.types.ndarray(ndim=1)
 #: Slots of the `work` array: the round number, the lengths of the two work lists, the
 #: number of circles reaching past a wall, and the number of large circles (two-level grid).
 ROUND, LIST0, LIST1, WALLED, NLARGE = 0, 1, 2, 3, 4
+#: The longest contact list a circle may have (simulation.DISCRETE_CONTACTS is its length):
+#: `_enlist_overlapping` keeps a circle and its contacts in a local vector.
+MOST_CONTACTS = 7
 #: Entries of the `spread` array of a two-level grid: the largest radius of a small circle and
 #: the largest radius.
 R_CUT, R_MAX = 0, 1
@@ -381,12 +384,24 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
     Positions do not move between rounds, so only pairs with i can change their key when i's
     velocity changes, and only overlapping pairs have a key: other circles' picks still hold.
     """
-    _enlist(i, rnd, marked, lists, work, side)
     listed = n_contacts[i]
     if listed <= contacts.shape[0]:
-        for m in range(listed):
-            _enlist(contacts[m, i], rnd, marked, lists, work, side)
+        # The newly listed ones taken together: one add to the list's length, not one each
+        # (the two threads' adds to it were most of a round's resolve).
+        got = ti.Vector.zero(ti.i32, MOST_CONTACTS + 1)
+        m = 0
+        for a in range(listed + 1):
+            k = i if a == 0 else contacts[a - 1, i]
+            if marked[k] < rnd:
+                if ti.atomic_max(marked[k], rnd) < rnd:
+                    got[m] = k
+                    m += 1
+        if m > 0:
+            at = ti.atomic_add(work[LIST0 + side], m)
+            for a in range(m):
+                lists[side, at + a] = got[a]
     else:
+        _enlist(i, rnd, marked, lists, work, side)
         c = cell_of[i]
         kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
         for r in range(runs):

@@ -50,7 +50,8 @@ EVENT_QUEUE_ON_CPU = True
 JAM_CHECK_ROUNDS = 64
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
 MAX_BOUND_SWEEPS = 10_000
-#: Overlapping neighbours a circle remembers within a discrete step (more: it searches its cells).
+#: Overlapping neighbours a circle remembers within a discrete step (more: it searches its
+#: cells); at most discrete.MOST_CONTACTS.
 DISCRETE_CONTACTS = 4
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
@@ -256,6 +257,9 @@ class Simulation:
             self._marked = ti.ndarray(ti.i32, shape=n)
             # Contact m of every circle in one row: most circles overlap at most one other, so the
             # rounds read row 0 only.
+            if not 0 < DISCRETE_CONTACTS <= discrete.MOST_CONTACTS:
+                raise ValueError(f"DISCRETE_CONTACTS = {DISCRETE_CONTACTS} must be within 1 to "
+                                 f"{discrete.MOST_CONTACTS} (discrete.MOST_CONTACTS)")
             self._contacts = ti.ndarray(ti.i32, shape=(DISCRETE_CONTACTS, n))
             self._n_contacts = ti.ndarray(ti.i32, shape=n)
             self._work_lists = ti.ndarray(ti.i32, shape=(2, n))
