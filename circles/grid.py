@@ -462,6 +462,9 @@ class Grid:
         self.parts = ti.ndarray(ti.i32, shape=2 * count_parts() + 1)
         self.ncx = self.ncy = 1
         self.reach = 0.0
+        # Whether sorted_ids lists every circle, in the cell order of the last build (a build
+        # without a mask, or a scheme's own; see Simulation._reorder).
+        self.complete = False
         self._shapes = {}  # reach -> (ncx, ncy): most steps ask for the reach of the step before
 
     def shape_for(self, reach: float):
@@ -497,6 +500,7 @@ class Grid:
         masked = include is not None
         _build(pos, include if masked else mask, cell_of, slot, cell_count, cell_start, sorted_ids, self.parts, *shape,
                masked, self.periodic, self.serial)
+        self.complete = not masked
 
     def args(self):
         """The grid's arrays and sizes, in the order the scheme kernels take them."""

@@ -333,6 +333,7 @@ class Simulation:
         order = self._cell_order(pos)
         self._ids_cache = order
         self._color_cache = None
+        self.grid.complete = False
         self.ids.from_numpy(order.astype(np.int32))
         self.pos.from_numpy(pos[order].astype(self._np_real))
         self.vel.from_numpy(vel[order].astype(self._np_real))
@@ -370,15 +371,18 @@ class Simulation:
         Results do not depend on the memory order: event keys and the owners of per-circle
         sums are creation ids, and pair arithmetic is symmetric in the two circles. So the
         order inside a cell may follow thread timing (a GPU grid's atomic slots) without
-        changing the state.
+        changing the state, and the order of the last step's grid serves: its positions are
+        at most a step old (a third of the reorder's time was a grid build of its own).
         """
-        self.grid.build(self.pos, 2.0 * self._rmax)
+        if not self.grid.complete:
+            self.grid.build(self.pos, 2.0 * self._rmax)
         if self._scratch is None:
             self._scratch = (self._like(self.pos), self._like(self.radius), self._like(self.ids),
                              self._like(self.virial))
         reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
                                  self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch,
                                  self._serial)
+        self.grid.complete = False  # its slots name the circles of the old order
         self._ids_cache = self._color_cache = None
         self._list_large()
 
@@ -586,6 +590,7 @@ class Simulation:
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
                                    real, periodic, two,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
+        self.grid.complete = True
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
