@@ -115,26 +115,26 @@ def copy_vec(src: ndarr, dst: ndarr):
 
 
 @ti.func
-def _permute_one(arr: ti.template(), scratch: ti.template(), order: ti.template(), serial: ti.template()):
-    each(arr.shape[0], _gather, (arr, scratch, order), serial)
-    each(arr.shape[0], _copy, (scratch, arr), serial)
+def _gather_chain(order: ti.template(), chain: ti.template(), serial: ti.template()):
+    """chain = (free, a_1, ..., a_m), arrays of one kind: a_1 gathered by `order` into free,
+    then each a_k into a_(k-1), which the gather before has read (top-level loops run in turn)."""
+    for k in ti.static(range(1, len(chain))):
+        each(order.shape[0], _gather, (chain[k], chain[k - 1], order), serial)
 
 
 @launch.kernel
 def permute_state(order: ndarr, pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr,
-                  pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr, vec_scratch: ndarr,
-                  real_scratch: ndarr, int_scratch: ndarr, f64_scratch: ndarr, serial: ti.template()):
-    """arr[k] = arr[order[k]] for every per-circle array, in one launch (scratch arrays of each kind);
-    with `serial`, on one thread (see backend.SERIAL_N)."""
-    _permute_one(pos, vec_scratch, order, serial)
-    _permute_one(vel, vec_scratch, order, serial)
-    _permute_one(radius, real_scratch, order, serial)
-    _permute_one(inv_mass, real_scratch, order, serial)
-    _permute_one(ids, int_scratch, order, serial)
-    _permute_one(pair_count, int_scratch, order, serial)
-    _permute_one(wall_count, int_scratch, order, serial)
-    _permute_one(virial, f64_scratch, order, serial)
-    _permute_one(wall_impulse, f64_scratch, order, serial)
+                  pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr, vec_free: ndarr,
+                  real_free: ndarr, int_free: ndarr, f64_free: ndarr, serial: ti.template()):
+    """Every per-circle array permuted, arr'[k] = arr[order[k]], in one launch and without
+    copies: each kind's arrays are gathered along a chain from a free array of their kind
+    (`_gather_chain`), so that pos' is in vec_free, vel' in pos's array, and vel's array is
+    free after (see Simulation._reorder, which renames them). With `serial`, on one thread
+    (see backend.SERIAL_N)."""
+    _gather_chain(order, (vec_free, pos, vel), serial)
+    _gather_chain(order, (real_free, radius, inv_mass), serial)
+    _gather_chain(order, (int_free, ids, pair_count, wall_count), serial)
+    _gather_chain(order, (f64_free, virial, wall_impulse), serial)
 
 
 @launch.kernel

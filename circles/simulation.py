@@ -379,9 +379,16 @@ class Simulation:
         if self._scratch is None:
             self._scratch = (self._like(self.pos), self._like(self.radius), self._like(self.ids),
                              self._like(self.virial))
+        vec, real, i32, f64 = self._scratch
         reductions.permute_state(self.grid.sorted_ids, self.pos, self.vel, self.radius, self.inv_mass, self.ids,
-                                 self.pair_count, self.wall_count, self.virial, self.wall_impulse, *self._scratch,
+                                 self.pair_count, self.wall_count, self.virial, self.wall_impulse, vec, real, i32, f64,
                                  self._serial)
+        # Each array's permuted values are in the array before it in its kind's chain.
+        (self.pos, self.vel, vec) = (vec, self.pos, self.vel)
+        (self.radius, self.inv_mass, real) = (real, self.radius, self.inv_mass)
+        (self.ids, self.pair_count, self.wall_count, i32) = (i32, self.ids, self.pair_count, self.wall_count)
+        (self.virial, self.wall_impulse, f64) = (f64, self.virial, self.wall_impulse)
+        self._scratch = (vec, real, i32, f64)
         self.grid.complete = False  # its slots name the circles of the old order
         self._ids_cache = self._color_cache = None
         self._list_large()
