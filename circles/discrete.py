@@ -90,12 +90,20 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
 
 
 @ti.func
-def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.template(), side):
-    """Put k on the work list of round `rnd` (list `side`), once: marked[k] is the last round
-    k was listed for, and round numbers only grow."""
+def _claim(k, rnd, marked: ti.template()):
+    """Whether this thread is the first to mark k for round `rnd` (and must list it): marked[k]
+    is the last round k was listed for, and round numbers only grow."""
+    first = False
     if marked[k] < rnd:
-        if ti.atomic_max(marked[k], rnd) < rnd:
-            lists[side, ti.atomic_add(work[LIST0 + side], 1)] = k
+        first = ti.atomic_max(marked[k], rnd) < rnd
+    return first
+
+
+@ti.func
+def _enlist(k, rnd, marked: ti.template(), lists: ti.template(), work: ti.template(), side):
+    """Put k on the work list of round `rnd` (list `side`), once (`_claim`)."""
+    if _claim(k, rnd, marked):
+        lists[side, ti.atomic_add(work[LIST0 + side], 1)] = k
 
 
 @ti.func
@@ -176,8 +184,7 @@ def _search_run(c, r, kx, ky, cell_start: ti.template(), ncx, ncy, segs, periodi
 
 @ti.func
 def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
-                    n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
-                    rnd, box, periodic: ti.template()):
+                    n_contacts: ti.template(), marked: ti.template(), rnd, box, periodic: ti.template()):
     """Add j to i's contact list and i to j's when the two overlap (the test `_consider` makes);
     when they also approach, both are marked for the first round (`_listed`)."""
     lo = ti.min(i, j)
@@ -215,12 +222,12 @@ def _record_overlap(i, j, d, vel: ti.template(), contacts: ti.template(), n_cont
 def _contact_of(i, j, a: ti.template()):
     """`_record_contact` of the pair (i, j) as `geometry.pairs_once` visits it; `a` holds the
     other arguments."""
-    _record_contact(i, j, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10])
+    _record_contact(i, j, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8])
 
 
 @ti.func
 def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
-                   n_contacts: ti.template(), marked: ti.template(), lists: ti.template(), work: ti.template(),
+                   n_contacts: ti.template(), marked: ti.template(), work: ti.template(),
                    cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
                    box_w, box_h, spread: ti.template(), large: ti.template(), real: ti.template(),
                    periodic: ti.template(), two_level: ti.template(), serial: ti.template()):
@@ -264,7 +271,7 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                         _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
         else:
             pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
-                       (pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box, periodic))
+                       (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic))
     if ti.static(two_level):
         ti.loop_config(serialize=serial)
         for a in range(work[NLARGE]):
@@ -278,8 +285,7 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i and (j > i or not is_large(j, radius, spread, two_level)):
-                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, lists, work, rnd, box,
-                                        periodic)
+                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic)
 
 
 @ti.func
@@ -392,10 +398,9 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
         m = 0
         for a in range(listed + 1):
             k = i if a == 0 else contacts[a - 1, i]
-            if marked[k] < rnd:
-                if ti.atomic_max(marked[k], rnd) < rnd:
-                    got[m] = k
-                    m += 1
+            if _claim(k, rnd, marked):
+                got[m] = k
+                m += 1
         if m > 0:
             at = ti.atomic_add(work[LIST0 + side], m)
             for a in range(m):
@@ -619,7 +624,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
           inv_ch, dt, box_w, box_h, real, periodic, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
-    _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, lists, work, cell_of, cell_start,
+    _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, serial)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,

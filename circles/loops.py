@@ -6,7 +6,7 @@ loop that stores one item per iteration runs far below the memory's speed.
 `python bench/loop_cost.py` (a float32 copy of 128 MB, GB/s read plus written, on this
 project's 2-core machine, 2026-11-24 06:02 UTC): Taichi's plain loop 5.35 on two threads and
 2.1 on one; `each` taking 8 items per iteration 9.0 and 4.1, taking 16 11.9 and 5.8; numpy
-23.8 on one thread. The reorder's copies use `each` and the cell starts take `unroll()`
+23.8 on one thread. The reorder's gathers use `each` and the cell starts take `unroll()`
 cells per iteration; the grid's count and scatter take their items' loads before their
 stores (`grid.enter_cells`); passes whose
 items do much more work than a copy measured no faster or slower (the overlap search, the

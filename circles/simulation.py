@@ -255,11 +255,11 @@ class Simulation:
             self._partner = ti.ndarray(ti.i32, shape=n)
             self._picked = ti.ndarray(ti.i32, shape=n)
             self._marked = ti.ndarray(ti.i32, shape=n)
-            # Contact m of every circle in one row: most circles overlap at most one other, so the
-            # rounds read row 0 only.
             if not 0 < DISCRETE_CONTACTS <= discrete.MOST_CONTACTS:
                 raise ValueError(f"DISCRETE_CONTACTS = {DISCRETE_CONTACTS} must be within 1 to "
                                  f"{discrete.MOST_CONTACTS} (discrete.MOST_CONTACTS)")
+            # Contact m of every circle in one row: most circles overlap at most one other, so the
+            # rounds read row 0 only.
             self._contacts = ti.ndarray(ti.i32, shape=(DISCRETE_CONTACTS, n))
             self._n_contacts = ti.ndarray(ti.i32, shape=n)
             self._work_lists = ti.ndarray(ti.i32, shape=(2, n))
