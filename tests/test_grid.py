@@ -57,12 +57,18 @@ def check_prefix_sum(chunk, group, ncells, serial):
     assert (count[ncells:] == 7).all() and (start[ncells + 1:] == -5).all()  # ... and nothing past them is touched
 
 
+def cell_xy(p, ncx, ncy, box):
+    """The cell coordinates (cx, cy) of positions p on ncx x ncy cells over the box."""
+    cx = np.minimum((p[:, 0] * ncx / box[0]).astype(int), ncx - 1)
+    cy = np.minimum((p[:, 1] * ncy / box[1]).astype(int), ncy - 1)
+    return cx, cy
+
+
 def check_walled_cells(g, p, box):
     """The cells of grid g, built on positions p in a walled box, list every circle once, in its
     own cell."""
     cell_of, cell_start, sorted_ids = g.cells_numpy()
-    cx = np.minimum((p[:, 0] * g.ncx / box[0]).astype(int), g.ncx - 1)
-    cy = np.minimum((p[:, 1] * g.ncy / box[1]).astype(int), g.ncy - 1)
+    cx, cy = cell_xy(p, g.ncx, g.ncy, box)
     # Walled layout: rows of ncx + 1 cells, the first of each empty, an empty row below and above.
     expected = (cy + 1) * (g.ncx + 1) + cx + 1
     ncells = (g.ncy + 2) * (g.ncx + 1) + 1
@@ -191,8 +197,7 @@ def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
     ranges(*g.args(), full, fwd)
     full, fwd = full.to_numpy(), fwd.to_numpy()
     ncx, ncy = g.ncx, g.ncy
-    cx = np.minimum((p[:, 0] * ncx / box[0]).astype(int), ncx - 1)
-    cy = np.minimum((p[:, 1] * ncy / box[1]).astype(int), ncy - 1)
+    cx, cy = cell_xy(p, ncx, ncy, box)
 
     def near(a, b, m):  # cells a and b within one cell of each other along an axis of m cells
         d = np.abs(a - b)
@@ -266,11 +271,8 @@ def test_reorder_keeps_the_arrays_in_cell_order(circles_cpu, scheme):
     before = sim.state()
 
     def in_order():
-        pos = sim.pos.to_numpy().astype(np.float64)
-        ncx, ncy = sim.grid.ncx, sim.grid.ncy
-        cx = np.minimum((pos[:, 0] * (ncx / box[0])).astype(np.int64), ncx - 1)
-        cy = np.minimum((pos[:, 1] * (ncy / box[1])).astype(np.int64), ncy - 1)
-        return np.mean(np.diff(cy * ncx + cx) >= 0)
+        cx, cy = cell_xy(sim.pos.to_numpy().astype(np.float64), sim.grid.ncx, sim.grid.ncy, box)
+        return np.mean(np.diff(cy * sim.grid.ncx + cx) >= 0)
 
     assert in_order() < 0.8  # the order the circles were created in
     sim._reorder()
