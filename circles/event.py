@@ -20,7 +20,9 @@ tau). A round has three stages:
    touch disjoint circles and commute, so executing them together equals any serial order.
 
 On a CPU the step runs from one queue instead (`queue_step`, below): the same events in the
-same order with the same arithmetic, without the rounds.
+same order with the same arithmetic, without the rounds. With several threads and a walled
+box, the circles are split into parts whose events cannot touch each other within a window
+of the step, and each part runs its own queue (`split_parts`, `queue_parts`, below).
 
 Radius spread: cells as wide as the reach of the largest circles would hold hundreds of small
 circles when a few circles are much larger. In a walled box with a few large circles (see
@@ -44,6 +46,7 @@ import taichi as ti
 
 from . import launch
 from .discrete import NLARGE
+from .grid import PART_ITERATIONS, count_parts
 from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
                        pairs_once, run_parts, wide_row)
 
@@ -184,7 +187,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
               coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
-              queue: ti.template(), code, size, changed_a, changed_b, pend_at, scale, nb):
+              queue: ti.template(), code, size, changed_a, changed_b, pend_at, scale, nb, off, hb, part: ti.template()):
     """Circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
@@ -199,7 +202,10 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
     neighbour stamped `code` is offered to it: the neighbour takes the pair when it comes before
     its own event, and moves up the queue. So a pair's time of impact is computed once for both
     circles. With `code` < 0 nothing is stamped or offered. Returns (time, partner, queue size,
-    neighbours listed); without a queue, size comes back as given and none are listed."""
+    neighbours listed); without a queue, size comes back as given and none are listed. `off` and
+    `hb`: where the queue starts in its arrays (`_queue_put`). `part`: () or (label, touched,
+    dirty), when the circles are split into parts (`split_parts`): then only neighbours of i's
+    part are met, and a neighbour j in another part flags i touched and dirty and j dirty."""
     n = pos.shape[0]
     size_now = size
     pending = 0
@@ -215,13 +221,21 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
             best_t, best_lo, best_hi, best_p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, best_t,
                                                             best_lo, best_hi, best_p)
     c = cell_of[i]
+    mine = _own_part(i, part)
     runs, kx, ky = _runs(i, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
     for r in range(runs):
         k_lo, k_hi, coarse = _run(r, c, kx, ky, cell_start, coarse_start, ncx, ncy, segs, ncx_c, ncy_c, mx, my,
                                   periodic, two_level)
         for k in range(k_lo, k_hi):
             j = _at(k, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
-            if j >= 0 and j != i and (full or moved[j] != 0):
+            if ti.static(len(part) > 1):
+                if j >= 0 and _own_part(j, part) != mine:
+                    # A neighbour in another part: i's search is not complete past the window,
+                    # and i may have changed the pair (see `queue_parts`).
+                    part[1][i] = 1
+                    part[2][i] = 1
+                    part[2][j] = 1
+            if j >= 0 and j != i and _own_part(j, part) == mine and (full or moved[j] != 0):
                 if ti.static(len(queue) > 0):
                     # First met in this event's searches: a neighbour whose event was with one of
                     # the changed circles must search again (`queue_step`); the others take offers.
@@ -245,8 +259,19 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                     if ti.static(len(queue) > 0):
                         if moved[j] == code:
                             if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
-                                size_now = _queue_fix(j, size_now, scale, nb, queue, ev_t, ev_p, ids, n)
+                                size_now = _queue_fix(j, size_now, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
     return best_t, best_p, size_now, pending
+
+
+@ti.func
+def _own_part(i, part: ti.template()):
+    """The part of circle i (`split_parts`), or 0 when the circles are not split: part = () or
+    (label,). A label is the part k, or -1 - k for a circle claimed with its cluster (~x)."""
+    k = 0
+    if ti.static(len(part) > 0):
+        x = part[0][i]
+        k = x ^ (x >> 31)
+    return k
 
 
 @ti.func
@@ -360,8 +385,10 @@ def event_key(i, ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), n
 def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ids: ti.template(),
              ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), moved: ti.template(),
              cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
-             box_h, t_end, scalars: ti.template(), real: ti.template(), periodic: ti.template()):
-    """Each dirty circle finds its earliest event; scalars[0] = the earliest event of all.
+             box_h, t_end, scalars: ti.template(), real: ti.template(), periodic: ti.template(),
+             earliest: ti.template()):
+    """Each dirty circle finds its earliest event; with `earliest`, scalars[0] = the earliest
+    event of all.
 
     A circle that moved in the last round (or at the start of a step: all did), or whose
     partner did, searches all its neighbours. Any other dirty circle keeps its event, which
@@ -381,15 +408,16 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             t_i, p_i, unused, unused2 = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False, (),
-                                                  0, 0, 0, 0, 0, 0.0, 1)
+                                                  0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
             ev_t[i] = t_i
             ev_p[i] = p_i
     for i in range(n):
         moved[i] = 0
-    for i in range(n):
-        if ev_t[i] < scalars[0]:
-            # Reading first leaves only the few new minima to the (contended) atomic.
-            ti.atomic_min(scalars[0], ev_t[i])
+    if ti.static(earliest):
+        for i in range(n):
+            if ev_t[i] < scalars[0]:
+                # Reading first leaves only the few new minima to the (contended) atomic.
+                ti.atomic_min(scalars[0], ev_t[i])
 
 
 @ti.func
@@ -498,7 +526,7 @@ def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, e
     microseconds each). Returns the earliest event time when the bounds have settled (no event
     in the step when it exceeds t_end), or -1 when more sweeps are needed."""
     _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, moved, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-             segs, box_w, box_h, t_end, scalars, real, periodic)
+             segs, box_w, box_h, t_end, scalars, real, periodic, True)
     _seed_bounds(ev_t, d, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real, periodic)
     changed = _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
                       rows, segs, box_w, box_h, t_end, vlim, real, periodic)
@@ -710,51 +738,52 @@ def _before(x, t, y, u, ev_p: ti.template(), ids: ti.template(), n):
 
 
 @ti.func
-def _heap_put(k, x, t, heap: ti.template(), where: ti.template(), heap_t: ti.template()):
-    """Circle x, whose event is at time t, into heap slot k."""
-    heap[k] = x
-    heap_t[k] = t
+def _heap_put(k, x, t, heap: ti.template(), where: ti.template(), heap_t: ti.template(), off):
+    """Circle x, whose event is at time t, into heap slot k (of the heap from `off`)."""
+    heap[off + k] = x
+    heap_t[off + k] = t
     where[x] = k
 
 
 @ti.func
 def _sift_up(k, heap: ti.template(), where: ti.template(), heap_t: ti.template(), ev_p: ti.template(),
-             ids: ti.template(), n):
+             ids: ti.template(), n, off):
     """Move the event in heap slot k up to its place; returns its new slot. The parents it passes
     move down one level each, and it is written once, at its place (a hole moves up, not a
     swapped pair: half the stores)."""
-    x = heap[k]
-    t = heap_t[k]
+    x = heap[off + k]
+    t = heap_t[off + k]
     while k > 0:
         parent = (k - 1) // 2
-        y = heap[parent]
-        if _before(x, t, y, heap_t[parent], ev_p, ids, n):
-            _heap_put(k, y, heap_t[parent], heap, where, heap_t)
+        y = heap[off + parent]
+        if _before(x, t, y, heap_t[off + parent], ev_p, ids, n):
+            _heap_put(k, y, heap_t[off + parent], heap, where, heap_t, off)
             k = parent
         else:
             break
-    _heap_put(k, x, t, heap, where, heap_t)
+    _heap_put(k, x, t, heap, where, heap_t, off)
     return k
 
 
 @ti.func
 def _sift_down(k, size, heap: ti.template(), where: ti.template(), heap_t: ti.template(), ev_p: ti.template(),
-               ids: ti.template(), n):
+               ids: ti.template(), n, off):
     """Move the event in heap slot k down to its place, the earlier of its two children moving
     up each level (the hole of `_sift_up`, downwards)."""
-    x = heap[k]
-    t = heap_t[k]
+    x = heap[off + k]
+    t = heap_t[off + k]
     while 2 * k + 1 < size:
         m = 2 * k + 1
-        if m + 1 < size and _before(heap[m + 1], heap_t[m + 1], heap[m], heap_t[m], ev_p, ids, n):
+        if m + 1 < size and _before(heap[off + m + 1], heap_t[off + m + 1], heap[off + m], heap_t[off + m], ev_p,
+                                    ids, n):
             m += 1
-        y = heap[m]
-        if _before(y, heap_t[m], x, t, ev_p, ids, n):
-            _heap_put(k, y, heap_t[m], heap, where, heap_t)
+        y = heap[off + m]
+        if _before(y, heap_t[off + m], x, t, ev_p, ids, n):
+            _heap_put(k, y, heap_t[off + m], heap, where, heap_t, off)
             k = m
         else:
             break
-    _heap_put(k, x, t, heap, where, heap_t)
+    _heap_put(k, x, t, heap, where, heap_t, off)
 
 
 @ti.func
@@ -768,31 +797,32 @@ def _bucket(t, scale, nb):
 
 @ti.func
 def _queue_put(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(),
-               n):
+               n, off, hb):
     """Circle x, which has an event and is not in the queue, into it: into the heap when its
     bucket was poured, else at the front of its bucket's list. Returns the heap's size.
-    q: (heap, where, heap_t, head, nxt, prv, pending)."""
+    q: (heap, where, heap_t, head, nxt, prv, pending); the queue's heap starts at slot `off` of
+    its arrays and its nb buckets at `hb` of `head` (one queue of several, `queue_parts`)."""
     t = ev_t[x]
     b = _bucket(t, scale, nb)
-    first = q[3][b]
+    first = q[3][hb + b]
     if first == POURED:
-        q[0][size] = x
-        q[2][size] = t
-        _sift_up(size, q[0], q[1], q[2], ev_p, ids, n)
+        q[0][off + size] = x
+        q[2][off + size] = t
+        _sift_up(size, q[0], q[1], q[2], ev_p, ids, n, off)
         size += 1
     else:
         q[4][x] = first
         q[5][x] = -1
         if first >= 0:
             q[5][first] = x
-        q[3][b] = x
+        q[3][hb + b] = x
         q[1][x] = -2 - b
     return size
 
 
 @ti.func
 def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(),
-               n):
+               n, off, hb):
     """Put circle x where its (changed) event belongs in the queue, which holds each circle with
     an event once: in it when it has an event, out of it when not. Returns the heap's size."""
     k = q[1][x]
@@ -801,20 +831,20 @@ def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: 
     if has:
         b = _bucket(ev_t[x], scale, nb)
     if k >= 0:  # in the heap
-        if has and q[3][b] == POURED:  # stays there, moved to its place
-            q[2][k] = ev_t[x]
-            k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n)
-            _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n)
+        if has and q[3][hb + b] == POURED:  # stays there, moved to its place
+            q[2][off + k] = ev_t[x]
+            k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n, off)
+            _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n, off)
         else:
             size -= 1
             q[1][x] = -1
             if k < size:  # the last event fills the hole
-                q[0][k] = q[0][size]
-                q[2][k] = q[2][size]
-                k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n)
-                _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n)
+                q[0][off + k] = q[0][off + size]
+                q[2][off + k] = q[2][off + size]
+                k = _sift_up(k, q[0], q[1], q[2], ev_p, ids, n, off)
+                _sift_down(k, size, q[0], q[1], q[2], ev_p, ids, n, off)
             if has:
-                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
+                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n, off, hb)
     elif k <= -2:  # in bucket -2 - k's list
         old = -2 - k
         if b != old:
@@ -823,15 +853,132 @@ def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: 
             if pv >= 0:
                 q[4][pv] = nx
             else:
-                q[3][old] = nx
+                q[3][hb + old] = nx
             if nx >= 0:
                 q[5][nx] = pv
             q[1][x] = -1
             if has:
-                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
+                size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n, off, hb)
     elif has:
-        size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n)
+        size = _queue_put(x, size, scale, nb, q, ev_t, ev_p, ids, n, off, hb)
     return size
+
+
+@ti.func
+def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.template(), state: ti.template(),
+           sums: ti.template(), grid: ti.template(), log: ti.template(), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my,
+           r_cut, margin, t_offset, box, vlim2, real: ti.template(), periodic: ti.template(), record: ti.template(),
+           two_level: ti.template(), part: ti.template(), window: ti.template(), mark):
+    """Execute a filled queue's events in key order up to `horizon` (see above), each followed
+    by the searches it calls for; returns (reached, horizon): as `queue_step` returns, and the
+    step's end, moved to the time of a collision that would outrun the grid. state: (pos, vel,
+    radius, inv_mass, tau, ids, ev_t, ev_p, stamp); sums: (pair_count, virial, wall_count,
+    wall_impulse); grid: (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids); log:
+    (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`.
+    Events after `until` (at most the horizon) are left in the queue. `window`: () or, for a
+    window of a step split into parts (`queue_parts`), (saved, backup): each changed circle's
+    state is copied to `backup` before its first change in the window (saved[i] = mark, the
+    window's number)."""
+    pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
+    heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
+    n = pos.shape[0]
+    cur = -1  # the last bucket poured into the heap
+    executed = 0
+    while True:
+        while size == 0 and cur < nb - 1:
+            cur += 1
+            x = head[hb + cur]
+            head[hb + cur] = POURED
+            while x >= 0:
+                _heap_put(size, x, ev_t[x], heap, where, heap_t, off)
+                size += 1
+                x = nxt[x]
+            k = size // 2 - 1
+            while k >= 0:
+                _sift_down(k, size, heap, where, heap_t, ev_p, ids, n, off)
+                k -= 1
+        if size == 0:
+            break
+        c = heap[off]
+        e = ev_t[c]
+        if e > horizon or e > until:
+            break  # the queue holds events up to the end the step had before it was cut
+        p = ev_p[c]
+        changed = 1
+        if ti.static(len(window) > 0):
+            _save_first(c, window, mark, state, sums)
+            if p >= 0:
+                _save_first(p, window, mark, state, sums)
+        if p >= 0:
+            if ev_p[p] != c or ev_t[p] != e:
+                reached = -1.0
+                break
+            status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, sums[0], sums[1],
+                                 box, periodic)
+            if status == 0:
+                # It would outrun the grid: the step ends at e, which it executes (e is not
+                # before the new end). Later predictions look no further than e.
+                horizon = e
+                reached = ti.cast(e, ti.f64)
+                status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, sums[0],
+                                     sums[1], box, periodic)
+            if ti.static(record):
+                if status == 1:
+                    _log(e, ti.min(ids[c], ids[p]), ti.max(ids[c], ids[p]), t_offset, log[0], log[1], log[2],
+                         log[3])
+            changed = 2
+        else:
+            if ti.static(not periodic):
+                _wall_event(c, e, p, pos, vel, radius, inv_mass, tau, sums[2], sums[3], box)
+                if ti.static(record):
+                    _log(e, ids[c], p, t_offset, log[0], log[1], log[2], log[3])
+        executed += 1
+        if executed > most:
+            reached = -2.0
+            break
+        # Only pairs with c (and p) changed. Stamps of this event: `base` for a neighbour
+        # that keeps its event unless a pair with c or p comes first, base + 1 for c and p and
+        # for a neighbour whose event was with c or p (it searches again in full).
+        base = 2 * executed
+        stamp[c] = base + 1
+        other = -(1 << 30)  # no partner is this
+        if changed == 2:
+            stamp[p] = base + 1
+            other = p
+        # The searches of c, p, then of the neighbours listed as having had their event with
+        # c or p; c's and p's stamp their neighbours and offer each pair to them.
+        subjects = changed
+        m = 0
+        while m < subjects:
+            y = c
+            code = base
+            if m == 1 and changed == 2:
+                y = p
+            elif m >= changed:
+                y = pending[off + m - changed]
+                code = -1  # a full search, as c's and p's, without offers
+            ev_t[y], ev_p[y], size, more = _earliest(y, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, grid[0],
+                                                     grid[1], grid[2], ncx, ncy, rows, segs, box, horizon, real,
+                                                     periodic, grid[3], grid[4], ncx_c, ncy_c, mx, my, r_cut, margin,
+                                                     two_level, queue, code, size, c, other,
+                                                     off + subjects - changed, scale, nb, off, hb, part)
+            subjects += more
+            size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
+            m += 1
+    return reached, horizon
+
+
+@ti.func
+def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.template()):
+    """Circle x's state into the backup, unless it is there already this step (see `_drain`)."""
+    if window[0][x] != mark:
+        window[0][x] = mark
+        b = ti.static(window[1])
+        b[0][x] = state[0][x]
+        b[1][x] = state[1][x]
+        b[2][x] = state[4][x]
+        for k in ti.static(range(4)):
+            b[3 + k][x] = sums[k][x]
 
 
 @launch.kernel
@@ -869,7 +1016,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
             t_i, p_i, unused, unused2 = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                                                  margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1)
+                                                  margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
             ev_t[i] = t_i
             ev_p[i] = p_i
     nb = head.shape[0]  # buckets: one per QUEUE_BUCKET_CIRCLES circles (the caller's allocation)
@@ -887,93 +1034,332 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         size = 0  # of the heap; every bucket is still a list
         for i in range(n):
             if ev_p[i] != NO_EVENT:
-                size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n)
-        cur = -1  # the last bucket poured into the heap
-        executed = 0
+                size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, 0, 0)
         # Circles jammed in a chain that spans the box, with velocities, collide without end
         # at one instant; no physical step comes near this many events.
         most = ti.cast(ti.min(ti.cast(n, ti.i64) * MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
-        while True:
-            while size == 0 and cur < nb - 1:
-                cur += 1
-                x = head[cur]
-                head[cur] = POURED
-                while x >= 0:
-                    _heap_put(size, x, ev_t[x], heap, where, heap_t)
-                    size += 1
-                    x = nxt[x]
-                k = size // 2 - 1
-                while k >= 0:
-                    _sift_down(k, size, heap, where, heap_t, ev_p, ids, n)
-                    k -= 1
-            if size == 0:
-                break
-            c = heap[0]
-            e = ev_t[c]
-            if e > horizon:
-                break  # the queue holds events up to the end the step had before it was cut
-            p = ev_p[c]
-            changed = 1
-            if p >= 0:
-                if ev_p[p] != c or ev_t[p] != e:
-                    reached = -1.0
-                    break
-                status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
-                                     virial, box, periodic)
-                if status == 0:
-                    # It would outrun the grid: the step ends at e, which it executes (e is not
-                    # before the new end). Later predictions look no further than e.
-                    horizon = e
-                    reached = ti.cast(e, ti.f64)
-                    status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
-                                         virial, box, periodic)
-                if ti.static(record):
-                    if status == 1:
-                        _log(e, ti.min(ids[c], ids[p]), ti.max(ids[c], ids[p]), t_offset, counters, log_t, log_i,
-                             log_j)
-                changed = 2
-            else:
-                if ti.static(not periodic):
-                    _wall_event(c, e, p, pos, vel, radius, inv_mass, tau, wall_count, wall_impulse, box)
-                    if ti.static(record):
-                        _log(e, ids[c], p, t_offset, counters, log_t, log_i, log_j)
-            executed += 1
-            if executed > most:
-                reached = -2.0
-                break
-            # Only pairs with c (and p) changed. Stamps of this event: `base` for a neighbour
-            # that keeps its event unless a pair with c or p comes first, base + 1 for c and p and
-            # for a neighbour whose event was with c or p (it searches again in full).
-            base = 2 * executed
-            stamp[c] = base + 1
-            other = -(1 << 30)  # no partner is this
-            if changed == 2:
-                stamp[p] = base + 1
-                other = p
-            # The searches of c, p, then of the neighbours listed as having had their event with
-            # c or p; c's and p's stamp their neighbours and offer each pair to them.
-            subjects = changed
-            m = 0
-            while m < subjects:
-                y = c
-                code = base
-                if m == 1 and changed == 2:
-                    y = p
-                elif m >= changed:
-                    y = pending[m - changed]
-                    code = -1  # a full search, as c's and p's, without offers
-                ev_t[y], ev_p[y], size, more = _earliest(y, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp,
-                                                         cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box,
-                                                         horizon, real, periodic, coarse_start, coarse_ids, ncx_c,
-                                                         ncy_c, mx, my, r_cut, margin, two_level, queue, code, size,
-                                                         c, other, subjects - changed, scale, nb)
-                subjects += more
-                size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n)
-                m += 1
+        reached, horizon = _drain(size, horizon, horizon, reached, most, scale, nb, 0, 0, queue,
+                                  (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
+                                  (pair_count, virial, wall_count, wall_impulse),
+                                  (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
+                                  (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
+                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, (), (), 0)
     # A top-level loop (one inside a branch would run on one thread).
     _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial)
     return reached
 
+
+# ------------------------------------------------------------------ parts (CPU, several threads)
+#
+# Two circles can meet within a window [t0, t1] of the step only if at t0 they are within the
+# sum of their radii and 2 vlim (t1 - t0) of each other: neither moves faster than vlim. Call
+# such circles linked. A set of circles closed under links (a cluster and its like) evolves
+# through the window on its own: no event outside it touches its circles or changes a time
+# of impact that comes due in the window. `split_parts` cuts the box into strips of rows of
+# cells and gives each strip's circles a part, except that every cluster that crosses the
+# border between two strips goes whole to the lower one. `queue_parts` then runs one queue
+# per part, the threads taking parts in turn: the events of the window in the same order with
+# the same arithmetic as one queue for all (events of different parts touch disjoint circles
+# and commute), and a part's arrays are a fraction of the whole (tens of thousands of circles)
+# while its events run, so they are mostly in the cache.
+#
+# Over a whole step the clusters can span the box (at the bench's density and step, links
+# reach 1.7 diameters and the clusters across borders hold 92% of 1e6 circles): the step runs
+# in windows, each split anew (see `Simulation._queue_parts_step`). A part's searches meet
+# only its own circles, so a circle's event past the window can miss a pair with another
+# part: a search that meets a neighbour in another part flags the circle (`_earliest`,
+# `_pair_in_part`), and before the next window the flagged circles search again over all
+# their neighbours (`repredict`). A collision that would outrun the grid ends the step at its
+# time for every circle, but the other parts may have gone past it: the circles the window
+# changed are put back (each was copied before its first change in the window, `_save_first`)
+# and the window runs again up to that time.
+
+#: Circles per part (`split_parts`): enough for the borders' clusters to be a small share, few
+#: enough that a part's arrays mostly stay in the cache.
+PART_CIRCLES = 65536
+#: Rows of cells per part at least (a cluster that crosses a border reaches a row or two in).
+PART_MIN_ROWS = 4
+#: Parts at most.
+MOST_PARTS = 1024
+def part_info_size(parts: int) -> int:
+    """Entries of `split_parts`' info array for `parts` parts: part k's first slot in the
+    queues' arrays (info[k], k <= parts, info[parts] = n), the start and end of its claimed
+    circles in `claimed` (at parts + 1 + k and 2 parts + 1 + k), the threads' counter of borders
+    or parts taken (at 3 parts + 1) and whether the split holds (at 3 parts + 2)."""
+    return 3 * parts + 3
+
+
+@ti.func
+def _place_at(x, t, pos: ti.template(), vel: ti.template(), tau: ti.template()):
+    """Where circle x is at time t (after its clock tau), in float64."""
+    return ti.cast(pos[x], ti.f64) + ti.cast(vel[x], ti.f64) * (t - ti.cast(tau[x], ti.f64))
+
+
+@ti.func
+def _linked(x, j, t, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(), margin):
+    """Whether circles x and j are within reach of each other at time t (walled box)."""
+    d = _place_at(j, t, pos, vel, tau) - _place_at(x, t, pos, vel, tau)
+    s = ti.cast(radius[x], ti.f64) + ti.cast(radius[j], ti.f64) + margin
+    return d.dot(d) < s * s
+
+
+@ti.func
+def _strip_of(c, stride, rows_per, parts):
+    """The strip of rows_per rows of cells that holds cell c of a walled grid (`split_parts`).
+    By products with reciprocals, not integer divisions (tens of cycles each): c / stride has a
+    fractional part of at least 1 / stride (the frame's cell at x = -1 is empty) and (cy +
+    1/2) / rows_per one of at least 1 / (2 rows_per), far above float64's rounding."""
+    cy = ti.cast(ti.cast(c, ti.f64) * (1.0 / stride), ti.i32) - 1
+    return ti.min(ti.cast((cy + 0.5) * (1.0 / rows_per), ti.i32), parts - 1)
+
+
+@ti.func
+def _claim_cluster(i, s, b, t, lo, hi, pos: ti.template(), vel: ti.template(), tau: ti.template(),
+                   radius: ti.template(), label: ti.template(), claimed: ti.template(), cell_of: ti.template(),
+                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, reach):
+    """Claim for border b the cluster of circle i (in slot s): every circle linked to a claimed
+    one, breadth first, each labelled -1 - b with an atomic minimum and its slot listed in
+    claimed[lo:hi]. Returns the end of the list, or -1 when it runs out of room or meets a
+    circle that another border claimed (a cluster across two borders)."""
+    top = lo
+    if ti.atomic_min(label[i], -1 - b) >= 0:
+        claimed[top] = s
+        top += 1
+    else:
+        top = -1
+    m = lo
+    while 0 <= m and m < top:
+        x = sorted_ids[claimed[m]]
+        m += 1
+        xp = _place_at(x, t, pos, vel, tau)
+        rx = ti.cast(radius[x], ti.f64) + reach
+        for row in range(3):
+            k_lo, k_hi = neighbour_range(cell_of[x], row, 0, cell_start, ncx, ncy, False)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if top >= 0 and label[j] != -1 - b:
+                    d = _place_at(j, t, pos, vel, tau) - xp
+                    r = rx + ti.cast(radius[j], ti.f64)
+                    if d.dot(d) < r * r:
+                        old = ti.atomic_min(label[j], -1 - b)
+                        if old >= 0 and top < hi:
+                            claimed[top] = k
+                            top += 1
+                        elif old != -1 - b:
+                            top = -1
+                            m = -1
+    return top
+
+
+@launch.kernel
+def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, info: ndarr,
+                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows_per: ti.i32,
+                parts: ti.i32, t: ti.f64, margin: ti.f64) -> ti.i32:
+    """Split a walled box's circles into `parts` parts (see above): strips of `rows_per` rows of
+    cells (the last takes the rest), circle i of strip k labelled k, except the clusters of
+    linked circles (those within reach plus `margin` at time t, the most two circles close in on
+    each other from t to the end of the window of the step that the parts run, with a 1%
+    allowance) that cross a border: each goes whole to the strip below the border, its circles
+    labelled -1 - k and their slots listed in `claimed`, part k's from info[parts + 1 + k] to
+    info[2 parts + 1 + k] (each border has an equal share of `claimed`; the threads take the
+    borders in turn). Fills `info` (`part_info_size`). Returns 0 when a border's clusters
+    outgrow its share, or a cluster crosses two borders (linked circles that span the box, as
+    in a dense packing): then the caller runs shorter windows, or one queue."""
+    n = pos.shape[0]
+    stride = ncx + 1  # cells per row of the walled layout (`geometry.cell_index`)
+    for i in range(n):
+        label[i] = _strip_of(cell_of[i], stride, rows_per, parts)
+    taken = 3 * parts + 1
+    ok = 3 * parts + 2
+    info[taken] = 0
+    info[ok] = 1
+    share = claimed.shape[0] // ti.max(parts - 1, 1)
+    for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
+        if it % PART_ITERATIONS == 0:
+            reach = margin * 1.01
+            while True:
+                b = ti.atomic_add(info[taken], 1)
+                if b >= parts - 1:
+                    break
+                top = b * share
+                info[parts + 1 + b] = top
+                y = (b + 1) * rows_per - 1  # the last row of strip b
+                c_lo = (y + 1) * stride
+                for s in range(cell_start[c_lo], cell_start[c_lo + stride]):
+                    if top < 0:
+                        break
+                    i = sorted_ids[s]
+                    if label[i] >= 0:  # else claimed with its cluster already
+                        xp = _place_at(i, t, pos, vel, tau)
+                        rx = ti.cast(radius[i], ti.f64) + reach
+                        crosses = False
+                        a_lo, a_hi = neighbour_range(cell_of[i], 2, 0, cell_start, ncx, ncy, False)
+                        for k in range(a_lo, a_hi):
+                            d = _place_at(sorted_ids[k], t, pos, vel, tau) - xp
+                            r = rx + ti.cast(radius[sorted_ids[k]], ti.f64)
+                            if d.dot(d) < r * r:
+                                crosses = True
+                        if crosses:
+                            top = _claim_cluster(i, s, b, t, top, (b + 1) * share, pos, vel, tau, radius, label,
+                                                 claimed, cell_of, cell_start, sorted_ids, ncx, ncy, reach)
+                if top < 0:
+                    info[ok] = 0
+                    top = b * share
+                info[2 * parts + 1 + b] = top
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        info[2 * parts] = 0
+        info[3 * parts] = 0
+        # Part sizes: a strip's slots, less its circles claimed by any part, plus the part's claims.
+        for k in range(parts):
+            y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
+            info[k] = cell_start[(y1 + 1) * stride] - cell_start[(k * rows_per + 1) * stride]
+        for k in range(parts):
+            for m in range(info[parts + 1 + k], info[2 * parts + 1 + k]):
+                info[_strip_of(cell_of[sorted_ids[claimed[m]]], stride, rows_per, parts)] -= 1
+        for k in range(parts):
+            info[k] += info[2 * parts + 1 + k] - info[parts + 1 + k]
+        running = 0
+        for k in range(parts):
+            size = info[k]
+            info[k] = running
+            running += size
+        info[parts] = running
+    return info[ok]
+
+
+@ti.func
+def _member(q, k, s_hi, c0, label: ti.template(), claimed: ti.template(), sorted_ids: ti.template()):
+    """(slot, circle, whether in part k) of item q of part k's loop over its strip's slots (q <
+    s_hi; the strip's circles labelled k) and then its claimed circles (from claimed[c0])."""
+    s = q
+    if q >= s_hi:
+        s = claimed[c0 + q - s_hi]
+    i = sorted_ids[s]
+    take = q >= s_hi or label[i] == k
+    return s, i, take
+
+
+@ti.func
+def _pair_in_part(i, j, a: ti.template()):
+    """`_pair_once` for a pair within part a[12] (labels a[11]); a pair across two parts, which
+    cannot meet within the window, flags both circles touched and dirty, a[13] and a[14]
+    (`repredict` searches them in full before the next window)."""
+    if _own_part(j, (a[11],)) == a[12]:
+        _pair_once(i, j, a)
+    else:
+        for f in ti.static(range(13, 15)):
+            a[f][i] = 1
+            a[f][j] = 1
+
+
+@launch.kernel
+def restore_saved(saved: ndarr, mark: ti.i32, pos: ndarr, vel: ndarr, tau: ndarr, pair_count: ndarr, virial: ndarr,
+                  wall_count: ndarr, wall_impulse: ndarr, b_pos: ndarr, b_vel: ndarr, b_tau: ndarr,
+                  b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr):
+    """Every circle whose state the step saved (saved[i] == mark, see `_drain`) put back."""
+    for i in range(pos.shape[0]):
+        if saved[i] == mark:
+            pos[i] = b_pos[i]
+            vel[i] = b_vel[i]
+            tau[i] = b_tau[i]
+            pair_count[i] = b_pair_count[i]
+            virial[i] = b_virial[i]
+            wall_count[i] = b_wall_count[i]
+            wall_impulse[i] = b_wall_impulse[i]
+
+
+@launch.kernel
+def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
+              dirty: ndarr, touched: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
+              ncy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr, real: ti.template()):
+    """The events up to t_end of the circles flagged dirty (a touched circle, or one whose
+    partner is, searches all its neighbours; see `_predict`), in a walled box with one grid
+    level; the flags cleared. Before a step's first window every circle is flagged both ways;
+    before a later one, those the last window's events flagged (`_drain`)."""
+    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, 3, 1,
+             box_w, box_h, t_end, scalars, real, False, False)
+
+
+@launch.kernel
+def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
+                ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
+                prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
+                wall_impulse: ndarr, touched: ndarr, dirty: ndarr, saved: ndarr, b_pos: ndarr, b_vel: ndarr,
+                b_tau: ndarr, b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
+                label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
+                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64,
+                box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, mark: ti.i32,
+                first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, real: ti.template(),
+                record: ti.template()):
+    """The events up to `until` of a step over [0, t_end] of a walled box split into parts
+    (`split_parts`, one grid level), from the events the circles hold (`repredict`), or with
+    `first` (the step's first window) from the events each part predicts for its circles
+    (each pair once, as `_first_events_once`; a pair across two parts flags both circles
+    touched, for the next window to search in full): each part's queue filled and run
+    (`_drain`) by one thread, the threads taking parts in turn.
+    Circles stay at their clocks (`finish` moves them to the step's end). result[k]: what
+    `queue_step` returns, for part k. Part k's queue uses the slots info[k] to info[k + 1] of
+    heap, heap_t and pending, and the buckets from info[k] // QUEUE_BUCKET_CIRCLES + k of head."""
+    n = pos.shape[0]
+    stride = ncx + 1
+    queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
+    info[3 * parts + 1] = 0  # parts taken
+    for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
+        if it % PART_ITERATIONS == 0:
+            box = ti.Vector([box_w, box_h], dt=real)
+            horizon = ti.cast(t_end, real)
+            stop = ti.cast(until, real)
+            vlim2 = ti.cast(vlim, real) ** 2
+            while True:
+                k = ti.atomic_add(info[3 * parts + 1], 1)
+                if k >= parts:
+                    break
+                off = info[k]
+                size_k = info[k + 1] - off
+                c0 = info[parts + 1 + k]
+                y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
+                s_lo = cell_start[(k * rows_per + 1) * stride]
+                s_hi = cell_start[(y1 + 1) * stride]
+                items = s_hi + info[2 * parts + 1 + k] - c0
+                hb = off // QUEUE_BUCKET_CIRCLES + k
+                nb = ti.max(size_k // QUEUE_BUCKET_CIRCLES, 1)
+                scale = ti.min(nb / t_end, 1e30)
+                for b in range(nb):
+                    head[hb + b] = -1
+                if first != 0:
+                    for q in range(s_lo, items):
+                        s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
+                        if take:
+                            t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real,
+                                                        ti.cast(NEVER, real), n + 8, n + 8, NO_EVENT)
+                            ev_t[i] = t
+                            ev_p[i] = p
+                    for q in range(s_lo, items):
+                        s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
+                        if take:
+                            pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, 3, 1, False,
+                                       _pair_in_part, (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real,
+                                                       False, label, k, touched, dirty))
+                size = 0
+                for q in range(s_lo, items):
+                    s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
+                    if take:
+                        where[i] = -1
+                        stamp[i] = 0
+                        if ev_p[i] != NO_EVENT:
+                            size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
+                most = ti.cast(ti.min(ti.cast(size_k, ti.i64) * MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
+                reached, unused = _drain(size, horizon, stop, t_end, most, scale, nb, off, hb, queue,
+                                         (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
+                                         (pair_count, virial, wall_count, wall_impulse),
+                                         (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
+                                         (counters, log_t, log_i, log_j), ncx, ncy, 3, 1, 1, 1, 1, 1, 0.0, 0.0,
+                                         t_offset, box, vlim2, real, False, record, False,
+                                         (label, touched, dirty),
+                                         (saved, (b_pos, b_vel, b_tau, b_pair_count, b_virial, b_wall_count,
+                                                  b_wall_impulse)), mark)
+                result[k] = reached
 
 @launch.kernel
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,

@@ -17,7 +17,7 @@ import taichi as ti
 from . import discrete, event, placement, reductions
 from .backend import current_arch, ensure_init, serial_loops
 from .geometry import NEVER, spans
-from .grid import Grid
+from .grid import Grid, count_parts
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
 
@@ -44,6 +44,18 @@ DISCRETE_PARALLEL_ROUNDS = 4
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
 #: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
 EVENT_QUEUE_ON_CPU = True
+#: Steps an event queue runs whole after its split into parts failed (`event.split_parts`:
+#: clusters of linked circles too large, as in a dense packing) before it tries again.
+SPLIT_RETRY_STEPS = 16
+#: A split into parts claims at most n / PART_CLAIMS circles with their clusters across borders.
+PART_CLAIMS = 4
+#: The arrays of a circle's state that an event step changes, in the order event.queue_parts
+#: takes their backups.
+BACKUP_ORDER = ("pos", "vel", "tau", "pair_count", "virial", "wall_count", "wall_impulse")
+#: Windows of a step split into parts at most (`Simulation._queue_parts_step`), and the steps
+#: after which a step tries half as many.
+MOST_WINDOWS = 8
+WINDOW_RETRY_STEPS = 16
 #: Rounds of one event step after which (and after twice as many, and so on) the events it
 #: executed are counted: more than event.MOST_EVENTS_PER_CIRCLE per circle stop it with an
 #: error (jammed circles), as on the queue. A step takes about ten rounds.
@@ -245,6 +257,7 @@ class Simulation:
             self._alloc_event_arrays()
             # The queue's grid may have two levels (`event.build_coarse`); the rounds' has one.
             self._setup_two_level(self._event_queue)
+            self._setup_parts()
         if scheme == "discrete":
             if current_arch() == "gpu":
                 self._parallel_rounds = DISCRETE_MAX_ROUNDS
@@ -267,6 +280,42 @@ class Simulation:
             for arr in (self._picked, self._marked):
                 reductions.fill_i32(arr, 0)
             self._setup_two_level(True)
+
+    def _setup_parts(self):
+        """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, in a
+        walled box with one grid level, when the step's loops run on several threads."""
+        self._parts = (self._event_queue and not self._serial and not self.periodic and not self._two_level
+                       and count_parts() > 1)
+        self._split_wait = 0  # steps left before a split is tried again after one failed
+        self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
+        self.parts_run = 0  # windows run split into parts
+        if not self._parts:
+            return
+        n = self.n
+        self._label = ti.ndarray(ti.i32, shape=n)
+        self._claimed = ti.ndarray(ti.i32, shape=max(n // PART_CLAIMS, 1))
+        self._part_info = ti.ndarray(ti.i32, shape=event.part_info_size(event.MOST_PARTS))
+        self._part_result = ti.ndarray(ti.f64, shape=event.MOST_PARTS)
+        # Each part's calendar takes one bucket more than its share (see event.queue_parts).
+        self._head = ti.ndarray(ti.i32, shape=n // event.QUEUE_BUCKET_CIRCLES + event.MOST_PARTS + 1)
+        # What a step's events changed, put back when a collision would outrun the grid
+        # (`_queue_parts_step`), and the flags of its windows.
+        self._backup = {name: self._like(getattr(self, name)) for name in BACKUP_ORDER}
+        self._saved = ti.ndarray(ti.i32, shape=n)
+        reductions.fill_i32(self._saved, 0)
+        self._mark = 0
+        self._touched = ti.ndarray(ti.i32, shape=n)
+        self._dirty_w = ti.ndarray(ti.i32, shape=n)
+
+    def _part_shape(self):
+        """(parts, rows of cells per part) of this step's split (`event.split_parts`); parts < 2: none."""
+        ncy = self.grid.ncy
+        want = max(self.n // event.PART_CIRCLES, count_parts())
+        parts = min(want, ncy // event.PART_MIN_ROWS, event.MOST_PARTS)
+        if parts < 2:
+            return 0, 0
+        rows = -(-ncy // parts)
+        return -(-ncy // rows), rows
 
     def _setup_two_level(self, allowed):
         """Choose the grid: one level (cells as wide as the largest diameter), or, when `allowed`,
@@ -537,7 +586,17 @@ class Simulation:
     def _queue_step(self, h, vlim):
         """The rest of an event step over [0, h] from one queue (see `EVENT_QUEUE_ON_CPU`), in one
         launch that also brings every circle to the step's end; returns as `_event_step`. No
-        backup: a step cut short ends where the queue stopped (see circles.event)."""
+        backup: a step cut short ends where the queue stopped (see circles.event). Split into
+        parts when it can be (`_queue_parts_step`)."""
+        if self._parts:
+            if self._split_wait > 0:
+                self._split_wait -= 1
+            else:
+                return self._queue_parts_step(h, vlim)
+        return self._queue_step_whole(h, vlim)
+
+    def _queue_step_whole(self, h, vlim):
+        """`_queue_step` from one queue for all circles (`event.queue_step`)."""
         w, hgt = self.box
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
         g = self.grid.args()
@@ -561,6 +620,93 @@ class Simulation:
             self.cut_steps += 1
         return reached
 
+    def _queue_parts_step(self, h, vlim):
+        """`_queue_step` from one queue per part (`event.queue_parts`) in windows of the step: the
+        parts of a window hold whole clusters of the circles that can meet within it
+        (`event.split_parts`), and the shorter the window, the smaller the clusters. Every circle
+        predicts its first event of the step in its part's first window (`event.queue_parts`);
+        before each later window, those whose events or neighbours changed, or that have
+        neighbours in another part, predict again (`event.repredict`). A step starts with as many windows as
+        the last one ended with; a split that fails doubles them, up to MOST_WINDOWS, beyond
+        which the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as
+        many are tried. A collision that would outrun the grid ends the step at its time for
+        every circle, but the other parts may have gone past it: the circles the window changed
+        are put back (`_backup`, taken at each circle's first change in the window) and the
+        window runs again up to that time."""
+        w, hgt = self.box
+        record = self._record_cap > 0
+        g = self.grid
+        b = self._backup
+        parts, rows = self._part_shape()
+        if parts < 2:
+            return self._queue_step_whole(h, vlim)
+        if self.steps % WINDOW_RETRY_STEPS == 0 and self._windows > 1:
+            self._windows //= 2
+        cell_args = (g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy)
+        reductions.fill_i32(self._touched, 0)
+        reductions.fill_i32(self._dirty_w, 0)
+        t0 = 0.0
+        done = 0  # windows of the step done, in the finest cut so far
+        while t0 < h:
+            if done > 0:
+                event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
+                                self._dirty_w, self._touched, *cell_args, w, hgt, h, self._scalars, self._real)
+            while True:
+                t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
+                if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
+                                     self._part_info, *cell_args, rows, parts, t0, 2.0 * vlim * (t1 - t0)):
+                    break
+                if self._windows >= MOST_WINDOWS:
+                    self._split_wait = SPLIT_RETRY_STEPS
+                    return self._queue_step_whole(h, vlim)  # from the circles' clocks, as they are
+                self._windows *= 2
+                done *= 2
+            log_count = int(self._counters.to_numpy()[1]) if record else 0
+            self._mark += 1  # saved[i] == mark: circle i's state at the window's start is in the backup
+            end = h
+            first = int(done == 0)
+            while True:
+                event.queue_parts(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
+                                  self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
+                                  self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
+                                  self.wall_impulse, self._touched, self._dirty_w, self._saved,
+                                  *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
+                                  self._part_result, *cell_args, rows, parts, w, hgt, end, min(t1, end), vlim,
+                                  self.time, self._mark, first, self._counters, self._log_t, self._log_i,
+                                  self._log_j, self._real, record)
+                self.parts_run += 1
+                reached = self._part_result.to_numpy()[:parts]
+                if np.any(reached == -2):
+                    raise self._jammed()
+                if np.any(reached < 0):
+                    raise RuntimeError(f"the earliest event of a part's queue was not its partner's at step time "
+                                       f"{h} (internal error)")
+                cut = float(reached.min())
+                if cut >= end:
+                    break
+                # A collision at `cut` would outrun the grid: the step ends there. The window runs
+                # again from its start up to it, with every circle's events predicted anew (the
+                # window's parts still hold: a shorter window links fewer circles).
+                event.restore_saved(self._saved, self._mark, *(getattr(self, name) for name in BACKUP_ORDER),
+                                    *(b[name] for name in BACKUP_ORDER))
+                if record:
+                    self._set_counter(1, log_count)
+                reductions.fill_i32(self._touched, 1)
+                reductions.fill_i32(self._dirty_w, 1)
+                event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
+                                self._dirty_w, self._touched, *cell_args, w, hgt, cut, self._scalars, self._real)
+                end = cut
+                first = 0
+            if end < h:
+                h = end
+                self.cut_steps += 1
+                break
+            t0 = t1
+            done += 1
+        self.rounds += 1
+        event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._real, False, self._serial)
+        return h
+
     def _jammed(self):
         """The error of an event step that executed more than event.MOST_EVENTS_PER_CIRCLE events
         per circle."""
@@ -574,15 +720,21 @@ class Simulation:
         """Restore the state at the step's start for a step cut short at the collision that would
         outrun the grid; returns the cut time (see circles.event)."""
         cut = float(self._scalars.to_numpy()[1])
-        for name, arr in self._backup.items():
-            reductions.copy_vec(arr, getattr(self, name))
-        reductions.fill_real(self.tau, 0.0)
+        self._restore(log_count)
         reductions.fill_i32(self._dirty, 1)
         reductions.fill_i32(self._moved, 1)
-        if self._record_cap > 0:
-            self._set_counter(1, log_count)
         self._set_scalars(NEVER, NEVER)
         return cut
+
+    def _restore(self, log_count, clocks=True):
+        """The state of the `_backup`, with `log_count` events logged; with `clocks`, every clock
+        at 0 (a backup of the step's start; else the clocks are the backup's)."""
+        for name, arr in self._backup.items():
+            reductions.copy_vec(arr, getattr(self, name))
+        if clocks:
+            reductions.fill_real(self.tau, 0.0)
+        if self._record_cap > 0:
+            self._set_counter(1, log_count)
 
     def _discrete_step(self, h):
         w, hgt = self.box

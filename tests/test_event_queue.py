@@ -82,6 +82,43 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-equal", 10**9)],
+                         ids=["windows", "cut-steps", "no-split"])
+def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
+    """A walled box split into parts of about 200 circles (event.split_parts), each part's
+    events run from its own queue, the parts shared among the threads (event.queue_parts):
+    the state and the event log must equal the rounds' bit for bit. In the equal-mass scene
+    the clusters of linked circles grow past what a split may claim (a quarter of the
+    circles), so the steps run in windows; the radius-mass scene has steps cut short by a
+    collision that would outrun the grid (the window runs again up to it). With room for no
+    claims at all every split fails, and the steps fall back to one queue for all circles."""
+    from circles import backend, event, simulation
+
+    rounds = run(circles_cpu, monkeypatch, SCENES[name], False)
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    monkeypatch.setattr(simulation, "PART_CLAIMS", claims)
+    sim = run(circles_cpu, monkeypatch, SCENES[name], True)
+    assert sim._parts and sim._part_shape()[0] >= 4
+    if claims == 4:
+        assert sim.parts_run >= sim.steps  # every step ran in parts, one window or more
+    else:
+        assert sim.parts_run == 0 and sim._windows == simulation.MOST_WINDOWS
+    if name == "walls-f32-equal" and claims == 4:
+        assert sim._windows > 1
+    a, b = rounds.state(), sim.state()
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+    sa, sb = rounds.stats(), sim.stats()
+    for key in ("pair_collisions", "wall_collisions", "virial", "wall_impulse"):
+        assert sa[key] == sb[key], key
+    assert sa["pair_collisions"] > 1000
+    assert np.array_equal(rounds.events(), sim.events())
+    assert sim.cut_steps == rounds.cut_steps
+    if name == "walls-f64-radius":
+        assert sim.cut_steps > 0
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_queue_step_to_an_exact_time(circles_cpu, monkeypatch):
     """advance() ends steps at a given time (a step shorter than dt): the same in both."""
     states = []
