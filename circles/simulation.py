@@ -585,9 +585,9 @@ class Simulation:
 
     def _queue_step(self, h, vlim):
         """The rest of an event step over [0, h] from one queue (see `EVENT_QUEUE_ON_CPU`), in one
-        launch that also brings every circle to the step's end; returns as `_event_step`. No
-        backup: a step cut short ends where the queue stopped (see circles.event). Split into
-        parts when it can be (`_queue_parts_step`)."""
+        launch that also brings every circle to the step's end; returns as `_event_step`. One
+        queue takes no backup: a step cut short ends where the queue stopped (see
+        circles.event). Split into parts when it can be (`_queue_parts_step`)."""
         if self._parts:
             if self._split_wait > 0:
                 self._split_wait -= 1
@@ -624,12 +624,12 @@ class Simulation:
         """`_queue_step` from one queue per part (`event.queue_parts`) in windows of the step: the
         parts of a window hold whole clusters of the circles that can meet within it
         (`event.split_parts`), and the shorter the window, the smaller the clusters. Every circle
-        predicts its first event of the step in its part's first window (`event.queue_parts`);
-        before each later window, those whose events or neighbours changed, or that have
-        neighbours in another part, predict again (`event.repredict`). A step starts with as many windows as
-        the last one ended with; a split that fails doubles them, up to MOST_WINDOWS, beyond
-        which the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as
-        many are tried. A collision that would outrun the grid ends the step at its time for
+        predicts its first event of the step in its part in the first window; before each later
+        window, the circles whose searches met a neighbour in another part, and those paired
+        with them, predict again (`event.repredict`). A step starts with as many windows as the
+        last one ended with; a split that fails doubles them, up to MOST_WINDOWS, beyond which
+        the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as many
+        are tried. A collision that would outrun the grid ends the step at its time for
         every circle, but the other parts may have gone past it: the circles the window changed
         are put back (`_backup`, taken at each circle's first change in the window) and the
         window runs again up to that time."""
