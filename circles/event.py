@@ -20,8 +20,8 @@ tau). A round has three stages:
    touch disjoint circles and commute, so executing them together equals any serial order.
 
 On a CPU the step runs from one queue instead (`queue_step`, below): the same events in the
-same order with the same arithmetic, without the rounds. With several threads and a walled
-box, the circles are split into parts whose events cannot touch each other within a window
+same order with the same arithmetic, without the rounds. With several threads and one grid
+level, the circles are split into parts whose events cannot touch each other within a window
 of the step, and each part runs its own queue (`split_parts`, `queue_parts`, below).
 
 Radius spread: cells as wide as the reach of the largest circles would hold hundreds of small
@@ -1057,7 +1057,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # through the window on its own: no event outside it touches its circles or changes a time
 # of impact that comes due in the window. `split_parts` cuts the box into strips of rows of
 # cells and gives each strip's circles a part, except that every cluster that crosses the
-# border between two strips goes whole to the lower one. `queue_parts` then runs one queue
+# border between two strips goes whole to the lower one (in a periodic box the border
+# between the last strip and the first is the last one's). `queue_parts` then runs one queue
 # per part, the threads taking parts in turn: the events of the window in the same order with
 # the same arithmetic as one queue for all (events of different parts touch disjoint circles
 # and commute), and a part's arrays are a fraction of the whole (tens of thousands of circles)
@@ -1096,27 +1097,44 @@ def _place_at(x, t, pos: ti.template(), vel: ti.template(), tau: ti.template()):
 
 
 @ti.func
-def _linked(x, j, t, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(), margin):
-    """Whether circles x and j are within reach of each other at time t (walled box)."""
-    d = _place_at(j, t, pos, vel, tau) - _place_at(x, t, pos, vel, tau)
-    s = ti.cast(radius[x], ti.f64) + ti.cast(radius[j], ti.f64) + margin
-    return d.dot(d) < s * s
+def _gap(xp, j, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), periodic: ti.template()):
+    """From xp (float64) to circle j at time t (the nearest image in a periodic box)."""
+    d = _place_at(j, t, pos, vel, tau) - xp
+    if ti.static(periodic):
+        d -= box * ti.round(d / box)
+    return d
 
 
 @ti.func
-def _strip_of(c, stride, rows_per, parts):
-    """The strip of rows_per rows of cells that holds cell c of a walled grid (`split_parts`).
-    By products with reciprocals, not integer divisions (tens of cycles each): c / stride has a
-    fractional part of at least 1 / stride (the frame's cell at x = -1 is empty) and (cy +
-    1/2) / rows_per one of at least 1 / (2 rows_per), far above float64's rounding."""
-    cy = ti.cast(ti.cast(c, ti.f64) * (1.0 / stride), ti.i32) - 1
+def _row_start(y, ncx, periodic: ti.template()):
+    """The first cell of row y of the grid (`geometry.cell_index`; a walled grid's rows begin
+    with an empty frame cell, below row 0 lies an empty row)."""
+    c = y * ncx
+    if ti.static(not periodic):
+        c = (y + 1) * (ncx + 1)
+    return c
+
+
+@ti.func
+def _strip_of(c, ncx, rows_per, parts, periodic: ti.template()):
+    """The strip of rows_per rows of cells that holds cell c (`split_parts`). By products with
+    reciprocals, not integer divisions (tens of cycles each): (c + 1/2) / (cells per row) and
+    (cy + 1/2) / rows_per have fractional parts of at least half their divisor's reciprocal,
+    far above float64's rounding."""
+    stride = ncx
+    if ti.static(not periodic):
+        stride = ncx + 1
+    cy = ti.cast((ti.cast(c, ti.f64) + 0.5) * (1.0 / stride), ti.i32)
+    if ti.static(not periodic):
+        cy -= 1
     return ti.min(ti.cast((cy + 0.5) * (1.0 / rows_per), ti.i32), parts - 1)
 
 
 @ti.func
-def _claim_cluster(i, s, b, t, lo, hi, pos: ti.template(), vel: ti.template(), tau: ti.template(),
+def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template(), tau: ti.template(),
                    radius: ti.template(), label: ti.template(), claimed: ti.template(), cell_of: ti.template(),
-                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, reach):
+                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, reach,
+                   periodic: ti.template()):
     """Claim for border b the cluster of circle i (in slot s): every circle linked to a claimed
     one, breadth first, each labelled -1 - b with an atomic minimum and its slot listed in
     claimed[lo:hi]. Returns the end of the list, or -1 when it runs out of room or meets a
@@ -1133,14 +1151,15 @@ def _claim_cluster(i, s, b, t, lo, hi, pos: ti.template(), vel: ti.template(), t
         m += 1
         xp = _place_at(x, t, pos, vel, tau)
         rx = ti.cast(radius[x], ti.f64) + reach
-        for row in range(3):
-            k_lo, k_hi = neighbour_range(cell_of[x], row, 0, cell_start, ncx, ncy, False)
+        for r in range(rows * segs):
+            row, seg = run_parts(r, segs, periodic)
+            k_lo, k_hi = neighbour_range(cell_of[x], row, seg, cell_start, ncx, ncy, periodic)
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 if top >= 0 and label[j] != -1 - b:
-                    d = _place_at(j, t, pos, vel, tau) - xp
-                    r = rx + ti.cast(radius[j], ti.f64)
-                    if d.dot(d) < r * r:
+                    d = _gap(xp, j, t, box, pos, vel, tau, periodic)
+                    q = rx + ti.cast(radius[j], ti.f64)
+                    if d.dot(d) < q * q:
                         old = ti.atomic_min(label[j], -1 - b)
                         if old >= 0 and top < hi:
                             claimed[top] = k
@@ -1153,39 +1172,45 @@ def _claim_cluster(i, s, b, t, lo, hi, pos: ti.template(), vel: ti.template(), t
 
 @launch.kernel
 def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, info: ndarr,
-                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows_per: ti.i32,
-                parts: ti.i32, t: ti.f64, margin: ti.f64) -> ti.i32:
-    """Split a walled box's circles into `parts` parts (see above): strips of `rows_per` rows of
-    cells (the last takes the rest), circle i of strip k labelled k, except the clusters of
-    linked circles (those within reach plus `margin` at time t, the most two circles close in on
-    each other from t to the end of the window of the step that the parts run, with a 1%
-    allowance) that cross a border: each goes whole to the strip below the border, its circles
-    labelled -1 - k and their slots listed in `claimed`, part k's from info[parts + 1 + k] to
-    info[2 parts + 1 + k] (each border has an equal share of `claimed`; the threads take the
-    borders in turn). Fills `info` (`part_info_size`). Returns 0 when a border's clusters
-    outgrow its share, or a cluster crosses two borders (linked circles that span the box, as
-    in a dense packing): then the caller runs shorter windows, or one queue."""
+                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32,
+                segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64, box_h: ti.f64, t: ti.f64,
+                margin: ti.f64, periodic: ti.template()) -> ti.i32:
+    """Split the circles into `parts` parts (see above): strips of `rows_per` rows of cells (the
+    last takes the rest), circle i of strip k labelled k, except the clusters of linked
+    circles (those within reach plus `margin` at time t, the most two circles close in on each
+    other from t to the end of the window of the step that the parts run, with a 1%
+    allowance) that cross a border: each goes whole to the strip below the border (in a
+    periodic box, the border between the last strip and the first is the last strip's), its
+    circles labelled -1 - k and their slots listed in `claimed`, part k's from
+    info[parts + 1 + k] to info[2 parts + 1 + k] (each border has an equal share of `claimed`;
+    the threads take the borders in turn). Fills `info` (`part_info_size`). Returns 0 when a
+    border's clusters outgrow its share, or a cluster crosses two borders (linked circles that
+    span the box, as in a dense packing): then the caller runs shorter windows, or one queue.
+    (rows, segs): see `geometry.spans`."""
     n = pos.shape[0]
-    stride = ncx + 1  # cells per row of the walled layout (`geometry.cell_index`)
     for i in range(n):
-        label[i] = _strip_of(cell_of[i], stride, rows_per, parts)
+        label[i] = _strip_of(cell_of[i], ncx, rows_per, parts, periodic)
     taken = 3 * parts + 1
     ok = 3 * parts + 2
+    borders = parts - 1
+    if ti.static(periodic):
+        borders = parts
     info[taken] = 0
     info[ok] = 1
-    share = claimed.shape[0] // ti.max(parts - 1, 1)
+    share = claimed.shape[0] // ti.max(borders, 1)
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
             reach = margin * 1.01
+            box = ti.Vector([box_w, box_h], dt=ti.f64)
             while True:
                 b = ti.atomic_add(info[taken], 1)
-                if b >= parts - 1:
+                if b >= borders:
                     break
                 top = b * share
                 info[parts + 1 + b] = top
-                y = (b + 1) * rows_per - 1  # the last row of strip b
-                c_lo = (y + 1) * stride
-                for s in range(cell_start[c_lo], cell_start[c_lo + stride]):
+                y = ti.select(b == parts - 1, ncy, (b + 1) * rows_per) - 1  # the last row of strip b
+                c_lo = _row_start(y, ncx, periodic)
+                for s in range(cell_start[c_lo], cell_start[_row_start(y + 1, ncx, periodic)]):
                     if top < 0:
                         break
                     i = sorted_ids[s]
@@ -1193,30 +1218,34 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                         xp = _place_at(i, t, pos, vel, tau)
                         rx = ti.cast(radius[i], ti.f64) + reach
                         crosses = False
-                        a_lo, a_hi = neighbour_range(cell_of[i], 2, 0, cell_start, ncx, ncy, False)
-                        for k in range(a_lo, a_hi):
-                            d = _place_at(sorted_ids[k], t, pos, vel, tau) - xp
-                            r = rx + ti.cast(radius[sorted_ids[k]], ti.f64)
-                            if d.dot(d) < r * r:
-                                crosses = True
+                        for seg in range(segs):
+                            a_lo, a_hi = neighbour_range(cell_of[i], 2, seg, cell_start, ncx, ncy, periodic)
+                            for k in range(a_lo, a_hi):
+                                d = _gap(xp, sorted_ids[k], t, box, pos, vel, tau, periodic)
+                                q = rx + ti.cast(radius[sorted_ids[k]], ti.f64)
+                                if d.dot(d) < q * q:
+                                    crosses = True
                         if crosses:
-                            top = _claim_cluster(i, s, b, t, top, (b + 1) * share, pos, vel, tau, radius, label,
-                                                 claimed, cell_of, cell_start, sorted_ids, ncx, ncy, reach)
+                            top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, radius,
+                                                 label, claimed, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+                                                 segs, reach, periodic)
                 if top < 0:
                     info[ok] = 0
                     top = b * share
                 info[2 * parts + 1 + b] = top
     ti.loop_config(serialize=True)
     for _ in range(1):
-        info[2 * parts] = 0
-        info[3 * parts] = 0
+        if ti.static(not periodic):
+            info[2 * parts] = 0  # the last strip has no border above it
+            info[3 * parts] = 0
         # Part sizes: a strip's slots, less its circles claimed by any part, plus the part's claims.
         for k in range(parts):
             y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
-            info[k] = cell_start[(y1 + 1) * stride] - cell_start[(k * rows_per + 1) * stride]
+            info[k] = (cell_start[_row_start(y1, ncx, periodic)]
+                       - cell_start[_row_start(k * rows_per, ncx, periodic)])
         for k in range(parts):
             for m in range(info[parts + 1 + k], info[2 * parts + 1 + k]):
-                info[_strip_of(cell_of[sorted_ids[claimed[m]]], stride, rows_per, parts)] -= 1
+                info[_strip_of(cell_of[sorted_ids[claimed[m]]], ncx, rows_per, parts, periodic)] -= 1
         for k in range(parts):
             info[k] += info[2 * parts + 1 + k] - info[parts + 1 + k]
         running = 0
@@ -1272,13 +1301,14 @@ def restore_saved(saved: ndarr, mark: ti.i32, pos: ndarr, vel: ndarr, tau: ndarr
 @launch.kernel
 def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
               dirty: ndarr, touched: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
-              ncy: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr, real: ti.template()):
+              ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
+              real: ti.template(), periodic: ti.template()):
     """The events up to t_end of the circles flagged dirty (a touched circle, or one whose
-    partner is, searches all its neighbours; see `_predict`), in a walled box with one grid
-    level; the flags cleared. Before a step's first window every circle is flagged both ways;
+    partner is, searches all its neighbours; see `_predict`), with one grid level; the flags
+    cleared. Before a step's first window every circle is flagged both ways;
     before a later one, those the last window's events flagged (`_drain`)."""
-    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, 3, 1,
-             box_w, box_h, t_end, scalars, real, False, False)
+    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+             segs, box_w, box_h, t_end, scalars, real, periodic, False)
 
 
 @launch.kernel
@@ -1288,11 +1318,12 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 wall_impulse: ndarr, touched: ndarr, dirty: ndarr, saved: ndarr, b_pos: ndarr, b_vel: ndarr,
                 b_tau: ndarr, b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
                 label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
-                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64,
+                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
+                parts: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, mark: ti.i32,
                 first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, real: ti.template(),
-                record: ti.template()):
-    """The events up to `until` of a step over [0, t_end] of a walled box split into parts
+                record: ti.template(), periodic: ti.template()):
+    """The events up to `until` of a step over [0, t_end] of circles split into parts
     (`split_parts`, one grid level), from the events the circles hold (`repredict`), or with
     `first` (the step's first window) from the events each part predicts for its circles
     (each pair once, as `_first_events_once`; a pair across two parts flags both circles
@@ -1302,7 +1333,6 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     `queue_step` returns, for part k. Part k's queue uses the slots info[k] to info[k + 1] of
     heap, heap_t and pending, and the buckets from info[k] // QUEUE_BUCKET_CIRCLES + k of head."""
     n = pos.shape[0]
-    stride = ncx + 1
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     info[3 * parts + 1] = 0  # parts taken
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
@@ -1319,8 +1349,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 size_k = info[k + 1] - off
                 c0 = info[parts + 1 + k]
                 y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
-                s_lo = cell_start[(k * rows_per + 1) * stride]
-                s_hi = cell_start[(y1 + 1) * stride]
+                s_lo = cell_start[_row_start(k * rows_per, ncx, periodic)]
+                s_hi = cell_start[_row_start(y1, ncx, periodic)]
                 items = s_hi + info[2 * parts + 1 + k] - c0
                 hb = off // QUEUE_BUCKET_CIRCLES + k
                 nb = ti.max(size_k // QUEUE_BUCKET_CIRCLES, 1)
@@ -1331,16 +1361,19 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real,
-                                                        ti.cast(NEVER, real), n + 8, n + 8, NO_EVENT)
+                            t = ti.cast(NEVER, real)
+                            p = NO_EVENT
+                            if ti.static(not periodic):
+                                t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t,
+                                                            n + 8, n + 8, p)
                             ev_t[i] = t
                             ev_p[i] = p
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, 3, 1, False,
-                                       _pair_in_part, (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real,
-                                                       False, label, k, touched, dirty))
+                            pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, rows, segs,
+                                       periodic, _pair_in_part, (pos, vel, radius, tau, ids, ev_t, ev_p, box,
+                                                                 horizon, real, periodic, label, k, touched, dirty))
                 size = 0
                 for q in range(s_lo, items):
                     s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
@@ -1354,8 +1387,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
                                          (pair_count, virial, wall_count, wall_impulse),
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
-                                         (counters, log_t, log_i, log_j), ncx, ncy, 3, 1, 1, 1, 1, 1, 0.0, 0.0,
-                                         t_offset, box, vlim2, real, False, record, False,
+                                         (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
+                                         0.0, t_offset, box, vlim2, real, periodic, record, False,
                                          (label, touched, dirty),
                                          (saved, (b_pos, b_vel, b_tau, b_pair_count, b_virial, b_wall_count,
                                                   b_wall_impulse)), mark)

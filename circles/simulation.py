@@ -282,10 +282,9 @@ class Simulation:
             self._setup_two_level(True)
 
     def _setup_parts(self):
-        """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, in a
-        walled box with one grid level, when the step's loops run on several threads."""
-        self._parts = (self._event_queue and not self._serial and not self.periodic and not self._two_level
-                       and count_parts() > 1)
+        """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, with one
+        grid level, when the step's loops run on several threads."""
+        self._parts = self._event_queue and not self._serial and not self._two_level and count_parts() > 1
         self._split_wait = 0  # steps left before a split is tried again after one failed
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
         self.parts_run = 0  # windows run split into parts
@@ -308,8 +307,11 @@ class Simulation:
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
 
     def _part_shape(self):
-        """(parts, rows of cells per part) of this step's split (`event.split_parts`); parts < 2: none."""
+        """(parts, rows of cells per part) of this step's split (`event.split_parts`); parts < 2: none
+        (a periodic grid under 3 cells wide has no forward half of its cells to predict from)."""
         ncy = self.grid.ncy
+        if self.grid.ncx < 3:
+            return 0, 0
         want = max(self.n // event.PART_CIRCLES, count_parts())
         parts = min(want, ncy // event.PART_MIN_ROWS, event.MOST_PARTS)
         if parts < 2:
@@ -637,12 +639,13 @@ class Simulation:
         record = self._record_cap > 0
         g = self.grid
         b = self._backup
-        parts, rows = self._part_shape()
+        parts, rows_per = self._part_shape()
         if parts < 2:
             return self._queue_step_whole(h, vlim)
         if self.steps % WINDOW_RETRY_STEPS == 0 and self._windows > 1:
             self._windows //= 2
-        cell_args = (g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy)
+        cell_args = (g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, *spans(g.ncx, g.ncy, self.periodic))
+        periodic = self.periodic
         reductions.fill_i32(self._touched, 0)
         reductions.fill_i32(self._dirty_w, 0)
         t0 = 0.0
@@ -650,11 +653,13 @@ class Simulation:
         while t0 < h:
             if done > 0:
                 event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                self._dirty_w, self._touched, *cell_args, w, hgt, h, self._scalars, self._real)
+                                self._dirty_w, self._touched, *cell_args, w, hgt, h, self._scalars, self._real,
+                                periodic)
             while True:
                 t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
                 if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
-                                     self._part_info, *cell_args, rows, parts, t0, 2.0 * vlim * (t1 - t0)):
+                                     self._part_info, *cell_args, rows_per, parts, w, hgt, t0, 2.0 * vlim * (t1 - t0),
+                                     periodic):
                     break
                 if self._windows >= MOST_WINDOWS:
                     self._split_wait = SPLIT_RETRY_STEPS
@@ -671,9 +676,9 @@ class Simulation:
                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                   self.wall_impulse, self._touched, self._dirty_w, self._saved,
                                   *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
-                                  self._part_result, *cell_args, rows, parts, w, hgt, end, min(t1, end), vlim,
+                                  self._part_result, *cell_args, rows_per, parts, w, hgt, end, min(t1, end), vlim,
                                   self.time, self._mark, first, self._counters, self._log_t, self._log_i,
-                                  self._log_j, self._real, record)
+                                  self._log_j, self._real, record, periodic)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]
                 if np.any(reached == -2):
@@ -694,7 +699,8 @@ class Simulation:
                 reductions.fill_i32(self._touched, 1)
                 reductions.fill_i32(self._dirty_w, 1)
                 event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                self._dirty_w, self._touched, *cell_args, w, hgt, cut, self._scalars, self._real)
+                                self._dirty_w, self._touched, *cell_args, w, hgt, cut, self._scalars, self._real,
+                                periodic)
                 end = cut
                 first = 0
             if end < h:
@@ -704,7 +710,7 @@ class Simulation:
             t0 = t1
             done += 1
         self.rounds += 1
-        event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._real, False, self._serial)
+        event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._real, periodic, self._serial)
         return h
 
     def _jammed(self):

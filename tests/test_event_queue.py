@@ -82,15 +82,17 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-equal", 10**9)],
-                         ids=["windows", "cut-steps", "no-split"])
+@pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("periodic-f64-area", 4),
+                                         ("walls-f32-equal", 10**9)],
+                         ids=["windows", "cut-steps", "periodic", "no-split"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     """A walled box split into parts of about 200 circles (event.split_parts), each part's
     events run from its own queue, the parts shared among the threads (event.queue_parts):
     the state and the event log must equal the rounds' bit for bit. In the equal-mass scene
     the clusters of linked circles grow past what a split may claim (a quarter of the
     circles), so the steps run in windows; the radius-mass scene has steps cut short by a
-    collision that would outrun the grid (the window runs again up to it). With room for no
+    collision that would outrun the grid (the window runs again up to it); in the periodic box
+    the strips' borders wrap around (the last strip's is with the first). With room for no
     claims at all every split fails, and the steps fall back to one queue for all circles."""
     from circles import backend, event, simulation
 
