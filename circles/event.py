@@ -265,8 +265,9 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
 
 @ti.func
 def _own_part(i, part: ti.template()):
-    """The part of circle i (`split_parts`), or 0 when the circles are not split: part = () or
-    (label,). A label is the part k, or -1 - k for a circle claimed with its cluster (~x)."""
+    """The part of circle i (`split_parts`), or 0 when the circles are not split: part = (), or
+    a tuple whose first array holds the labels. A label is the part k, or -1 - k for a circle
+    claimed with its cluster (~x)."""
     k = 0
     if ti.static(len(part) > 0):
         x = part[0][i]

@@ -212,6 +212,8 @@ class Simulation:
         self.sweeps = 0
         # Event steps cut short because a collision would outrun the grid (see circles.event).
         self.cut_steps = 0
+        # Windows of event steps run with the queue split into parts (see `_queue_parts_step`).
+        self.parts_run = 0
         self._mass = np.asarray(mass, dtype=np.float64).copy()
         self._radius = np.asarray(radius, dtype=np.float64).copy()
         self._color = np.asarray(color, dtype=np.uint8).copy()
@@ -287,7 +289,6 @@ class Simulation:
         self._parts = self._event_queue and not self._serial and not self._two_level and count_parts() > 1
         self._split_wait = 0  # steps left before a split is tried again after one failed
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
-        self.parts_run = 0  # windows run split into parts
         if not self._parts:
             return
         n = self.n
