@@ -121,6 +121,67 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, boundary):
+    """event.split_parts on 4000 circles in strips of about 300: every pair within reach of
+    each other (the sum of their radii and the margin, found here by brute force over all
+    pairs) lies in one part, the clusters claimed across borders among them; and the parts'
+    lists (a strip's circles labelled with it, then the circles claimed for it, labelled
+    -1 - k) hold every circle once, in parts of the sizes the split reports."""
+    from circles import backend, event
+    from circles.geometry import spans
+    from circles.simulation import SPEED_MARGIN
+
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    monkeypatch.setattr(event, "PART_CIRCLES", 300)
+    n, box = 4000, np.array([1.0, 1.0])
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=tuple(box), radius=0.005, speed=(0.5, 1.0),
+                                                   boundary=boundary, scheme="event", precision="f64", seed=2))
+    sim.step(3)
+    periodic = boundary == "periodic"
+    margin = 0.5 * SPEED_MARGIN * sim._max_speed() * sim.dt  # two circles closing in for a quarter step
+    g = sim.grid
+    g.build(sim.pos, 2 * sim._rmax + margin)
+    parts, rows_per = sim._part_shape()
+    assert sim._parts and parts >= 8
+    rows, segs = spans(g.ncx, g.ncy, periodic)
+    assert event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, sim._claimed, sim._part_info,
+                             g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
+                             *box, 0.0, margin, periodic)
+    label = sim._label.to_numpy()
+    part = label ^ (label >> 31)
+    pos, r = sim.pos.to_numpy(), sim.radius.to_numpy()  # every clock is at 0 between steps
+    linked = 0
+    for lo in range(0, n, 500):
+        d = pos[None, :, :] - pos[lo:lo + 500, None, :]
+        if periodic:
+            d -= box * np.round(d / box)
+        near = (d ** 2).sum(-1) < (r[lo:lo + 500, None] + r[None, :] + margin) ** 2
+        i, j = np.nonzero(near)
+        i += lo
+        assert np.array_equal(part[i], part[j])
+        linked += np.sum(i != j)
+    info, claimed = sim._part_info.to_numpy(), sim._claimed.to_numpy()
+    sorted_ids, cell_start = g.sorted_ids.to_numpy(), g.cell_start.to_numpy()
+
+    def row_start(y):
+        return y * g.ncx if periodic else (y + 1) * (g.ncx + 1)
+
+    members = []
+    for k in range(parts):
+        y1 = g.ncy if k == parts - 1 else (k + 1) * rows_per
+        strip = sorted_ids[cell_start[row_start(k * rows_per)]:cell_start[row_start(y1)]]
+        claims = sorted_ids[claimed[info[parts + 1 + k]:info[2 * parts + 1 + k]]]
+        assert np.all(label[claims] == -1 - k)
+        mine = np.concatenate([strip[label[strip] == k], claims])
+        assert len(mine) == info[k + 1] - info[k]
+        members.append(mine)
+    assert np.array_equal(np.sort(np.concatenate(members)), np.arange(n))
+    assert linked > 2000 and np.sum(label < 0) > 100  # pairs within reach (each counted from both circles),
+    # and circles claimed with their clusters across borders
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_queue_step_to_an_exact_time(circles_cpu, monkeypatch):
     """advance() ends steps at a given time (a step shorter than dt): the same in both."""
     states = []
