@@ -86,7 +86,7 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
                                          ("walls-f32-equal", 10**9)],
                          ids=["windows", "cut-steps", "periodic", "no-split"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
-    """A walled box split into parts of about 200 circles (event.split_parts), each part's
+    """Circles split into parts of about 200 (event.split_parts), each part's
     events run from its own queue, the parts shared among the threads (event.queue_parts):
     the state and the event log must equal the rounds' bit for bit. In the equal-mass scene
     the clusters of linked circles grow past what a split may claim (a quarter of the
