@@ -342,14 +342,7 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
     ti.loop_config(serialize=True)
     for i in range(n):
         box = ti.Vector([box_w, box_h], dt=real)
-        t = ti.cast(NEVER, real)
-        lo = n + 8
-        hi = n + 8
-        p = NO_EVENT
-        if ti.static(not periodic):
-            t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t, lo, hi, p)
-        ev_t[i] = t
-        ev_p[i] = p
+        _first_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
     forward = forward_fits(ncx, ncy, periodic)
     ti.loop_config(serialize=True)
     for own in range(n):
@@ -357,6 +350,21 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
         i = sorted_ids[own]
         pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _pair_once,
                    (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic))
+
+
+@ti.func
+def _first_wall_event(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                      ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), box, horizon,
+                      real: ti.template(), periodic: ti.template()):
+    """Circle i's event set to its earliest wall hit up to the horizon, or none (a periodic box
+    has no walls): the start of a prediction whose pairs are offered to both circles."""
+    n = pos.shape[0]
+    t = ti.cast(NEVER, real)
+    p = NO_EVENT
+    if ti.static(not periodic):
+        t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t, n + 8, n + 8, p)
+    ev_t[i] = t
+    ev_p[i] = p
 
 
 @ti.func
@@ -971,7 +979,7 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
 
 @ti.func
 def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.template()):
-    """Circle x's state into the backup, unless it is there already this step (see `_drain`)."""
+    """Circle x's state into the backup, unless it is there already this window (see `_drain`)."""
     if window[0][x] != mark:
         window[0][x] = mark
         b = ti.static(window[1])
@@ -1098,12 +1106,15 @@ def _place_at(x, t, pos: ti.template(), vel: ti.template(), tau: ti.template()):
 
 
 @ti.func
-def _gap(xp, j, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), periodic: ti.template()):
-    """From xp (float64) to circle j at time t (the nearest image in a periodic box)."""
+def _linked(xp, rx, j, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
+            periodic: ti.template()):
+    """Whether circle j at time t lies within rx + its radius of xp (float64; the nearest image
+    in a periodic box)."""
     d = _place_at(j, t, pos, vel, tau) - xp
     if ti.static(periodic):
         d -= box * ti.round(d / box)
-    return d
+    q = rx + ti.cast(radius[j], ti.f64)
+    return d.dot(d) < q * q
 
 
 @ti.func
@@ -1114,6 +1125,14 @@ def _row_start(y, ncx, periodic: ti.template()):
     if ti.static(not periodic):
         c = (y + 1) * (ncx + 1)
     return c
+
+
+@ti.func
+def _strip_slots(k, rows_per, parts, ncx, ncy, cell_start: ti.template(), periodic: ti.template()):
+    """Slots [lo, hi) of `sorted_ids` that hold the circles of strip k (its rows of cells, the
+    last strip's up to the top row)."""
+    y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
+    return cell_start[_row_start(k * rows_per, ncx, periodic)], cell_start[_row_start(y1, ncx, periodic)]
 
 
 @ti.func
@@ -1158,9 +1177,7 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 if top >= 0 and label[j] != -1 - b:
-                    d = _gap(xp, j, t, box, pos, vel, tau, periodic)
-                    q = rx + ti.cast(radius[j], ti.f64)
-                    if d.dot(d) < q * q:
+                    if _linked(xp, rx, j, t, box, pos, vel, tau, radius, periodic):
                         old = ti.atomic_min(label[j], -1 - b)
                         if old >= 0 and top < hi:
                             claimed[top] = k
@@ -1222,9 +1239,7 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                         for seg in range(segs):
                             a_lo, a_hi = neighbour_range(cell_of[i], 2, seg, cell_start, ncx, ncy, periodic)
                             for k in range(a_lo, a_hi):
-                                d = _gap(xp, sorted_ids[k], t, box, pos, vel, tau, periodic)
-                                q = rx + ti.cast(radius[sorted_ids[k]], ti.f64)
-                                if d.dot(d) < q * q:
+                                if _linked(xp, rx, sorted_ids[k], t, box, pos, vel, tau, radius, periodic):
                                     crosses = True
                         if crosses:
                             top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, radius,
@@ -1241,9 +1256,8 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
             info[3 * parts] = 0
         # Part sizes: a strip's slots, less its circles claimed by any part, plus the part's claims.
         for k in range(parts):
-            y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
-            info[k] = (cell_start[_row_start(y1, ncx, periodic)]
-                       - cell_start[_row_start(k * rows_per, ncx, periodic)])
+            s_lo, s_hi = _strip_slots(k, rows_per, parts, ncx, ncy, cell_start, periodic)
+            info[k] = s_hi - s_lo
         for k in range(parts):
             for m in range(info[parts + 1 + k], info[2 * parts + 1 + k]):
                 info[_strip_of(cell_of[sorted_ids[claimed[m]]], ncx, rows_per, parts, periodic)] -= 1
@@ -1306,8 +1320,9 @@ def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_
               real: ti.template(), periodic: ti.template()):
     """The events up to t_end of the circles flagged dirty (a touched circle, or one whose
     partner is, searches all its neighbours; see `_predict`), with one grid level; the flags
-    cleared. Before a step's first window every circle is flagged both ways;
-    before a later one, those the last window's events flagged (`_drain`)."""
+    cleared. Before a later window of a step in parts: the circles whose searches met a
+    neighbour in another part (`_earliest`, `_pair_in_part`); before a window runs again up to
+    a collision that would outrun the grid: every circle."""
     _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
              segs, box_w, box_h, t_end, scalars, real, periodic, False)
 
@@ -1349,9 +1364,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 off = info[k]
                 size_k = info[k + 1] - off
                 c0 = info[parts + 1 + k]
-                y1 = ti.select(k == parts - 1, ncy, (k + 1) * rows_per)
-                s_lo = cell_start[_row_start(k * rows_per, ncx, periodic)]
-                s_hi = cell_start[_row_start(y1, ncx, periodic)]
+                s_lo, s_hi = _strip_slots(k, rows_per, parts, ncx, ncy, cell_start, periodic)
                 items = s_hi + info[2 * parts + 1 + k] - c0
                 hb = off // QUEUE_BUCKET_CIRCLES + k
                 nb = ti.max(size_k // QUEUE_BUCKET_CIRCLES, 1)
@@ -1362,13 +1375,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            t = ti.cast(NEVER, real)
-                            p = NO_EVENT
-                            if ti.static(not periodic):
-                                t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t,
-                                                            n + 8, n + 8, p)
-                            ev_t[i] = t
-                            ev_p[i] = p
+                            _first_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real,
+                                              periodic)
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
