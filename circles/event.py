@@ -56,9 +56,25 @@ SWEEPS_PER_LAUNCH = 4
 ndarr = ti.types.ndarray(ndim=1)
 
 
+#: The cull of `pair_time_of_impact`: a pair is dropped as meeting after the horizon only when
+#: its gap closes too slowly by this relative margin, and by CULL_ABSOLUTE of the horizon's size
+#: (a few of its units in the last place, even in float32).
+CULL_RELATIVE = 2.0 ** -10
+CULL_ABSOLUTE = 2.0 ** -20
+
+
 @ti.func
-def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), lo, hi, box, real: ti.template(), periodic: ti.template()):
-    """Time of impact of circles lo < hi, or NEVER; computed from lo's side only so both agree bit for bit."""
+def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), lo, hi, box, horizon, real: ti.template(), periodic: ti.template()):
+    """Time of impact of circles lo < hi, or NEVER; computed from lo's side only so both agree bit for bit.
+
+    Most pairs of a search cannot meet before the horizon; their time is not computed (a square
+    root and a division), and NEVER comes back for them. The cull is a bound, not an estimate:
+    with T = horizon - t0 >= 0, q = -dx.dv > 0 and c = |dx|^2 - s^2, the gap squared
+    |dx + dv t|^2 - s^2 >= c - 2 q t stays positive up to the horizon when c > 2 q T, and then the computed
+    time, t0 + c / (q + sqrt(q^2 - |dv|^2 c)) >= t0 + c / (2 q), rounds above the horizon too
+    (margins CULL_RELATIVE and CULL_ABSOLUTE cover the round-off of every step). So a time at
+    or before the horizon is the same number with or without the cull, and a culled pair is
+    one whose time every caller rejects: the searches' results do not change, bit for bit."""
     t0 = ti.max(tau[lo], tau[hi])
     xl = pos[lo] + vel[lo] * (t0 - tau[lo])
     xh = pos[hi] + vel[hi] * (t0 - tau[hi])
@@ -67,15 +83,23 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     s = radius[lo] + radius[hi]
     b = dx.dot(dv)
     c = dx.dot(dx) - s * s
-    a = dv.dot(dv)
-    disc = b * b - a * c
-    # Every case computed and the answer selected, with no branches: which case a pair falls in
-    # is close to random, and a mispredicted branch costs more than the square root.
     never = ti.cast(NEVER, real)
-    hit = t0 + c / (-b + ti.sqrt(ti.max(disc, 0.0)))  # the root without cancellation
-    t = ti.select(disc > 0, hit, never)
-    t = ti.select(c <= 0, t0, t)  # touching (or overlapping by round-off) and approaching: collide now
-    return ti.select(b < 0, t, never)
+    t = never
+    reach = (horizon - t0) * (1.0 + CULL_RELATIVE) + ti.abs(horizon) * CULL_ABSOLUTE
+    # Touching already or closing fast enough to touch by the horizon: one test, rarely passed
+    # (a search's neighbours are mostly beyond reach), so its branch is well predicted; a
+    # separate test of b < 0 first would be a coin toss. (Receding pairs that pass it get
+    # NEVER below; with b >= 0 a pair passes only when it overlaps.)
+    if c + 2.0 * b * reach <= 0:
+        a = dv.dot(dv)
+        disc = b * b - a * c
+        # Every case computed and the answer selected, with no branches: which case a pair falls
+        # in is close to random, and a mispredicted branch costs more than the square root.
+        hit = t0 + c / (-b + ti.sqrt(ti.max(disc, 0.0)))  # the root without cancellation
+        t = ti.select(disc > 0, hit, never)
+        t = ti.select(c <= 0, t0, t)  # touching (or overlapping by round-off) and approaching: collide now
+        t = ti.select(b < 0, t, never)
+    return t
 
 
 @ti.func
@@ -248,7 +272,8 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                         else:
                             moved[j] = code
                 # From the pair's lower slot, so that both circles get the time bit for bit.
-                t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, real, periodic)
+                t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, horizon, real,
+                                       periodic)
                 if t <= horizon:
                     # The key (creation ids, so that ties break the same whatever the memory
                     # order), read only for the few pairs within the horizon.
@@ -316,7 +341,7 @@ def _pair_once(i, j, a: ti.template()):
     `geometry.pairs_once` visits it; `a` holds (pos, vel, radius, tau, ids, ev_t, ev_p, box,
     horizon, real, periodic)."""
     n = a[0].shape[0]
-    t = pair_time_of_impact(a[0], a[1], a[2], a[3], ti.min(i, j), ti.max(i, j), a[7], a[9], a[10])
+    t = pair_time_of_impact(a[0], a[1], a[2], a[3], ti.min(i, j), ti.max(i, j), a[7], a[8], a[9], a[10])
     if t <= a[8]:
         klo = ti.min(a[4][i], a[4][j])
         khi = ti.max(a[4][i], a[4][j])

@@ -1,6 +1,8 @@
 """The event scheme's pair time of impact, computed without branches, case by case against the
 test suite's own float64 formula (tests/reference.py): pairs that recede, approach and miss,
-approach and hit, and touch or overlap while approaching, with the two circles' clocks apart."""
+approach and hit, and touch or overlap while approaching, with the two circles' clocks apart.
+And its cull: with a horizon, a time at or before it is the same number as without one, and
+a pair left out is one that meets after it, in float32 and float64."""
 import math
 
 import numpy as np
@@ -15,11 +17,31 @@ vec2 = ti.types.vector(2, ti.f64)
 
 
 @ti.kernel
-def times(pos: ti.types.ndarray(dtype=vec2, ndim=1), vel: ti.types.ndarray(dtype=vec2, ndim=1),
-          radius: ti.types.ndarray(ndim=1), tau: ti.types.ndarray(ndim=1), out: ti.types.ndarray(ndim=1)):
-    box = ti.Vector([1e9, 1e9], dt=ti.f64)
+def times(pos: ti.types.ndarray(ndim=1), vel: ti.types.ndarray(ndim=1), radius: ti.types.ndarray(ndim=1),
+          tau: ti.types.ndarray(ndim=1), horizon: ti.types.ndarray(ndim=1), out: ti.types.ndarray(ndim=1),
+          real: ti.template()):
+    """Pair p's time of impact (circles 2p and 2p + 1) with horizon[p]."""
+    box = ti.Vector([1e9, 1e9], dt=real)
     for p in range(out.shape[0]):
-        out[p] = event.pair_time_of_impact(pos, vel, radius, tau, 2 * p, 2 * p + 1, box, ti.f64, False)
+        out[p] = event.pair_time_of_impact(pos, vel, radius, tau, 2 * p, 2 * p + 1, box, horizon[p], real, False)
+
+
+def device_arrays(real, *host):
+    """Taichi arrays of the host arrays in precision `real` (positions and velocities as vectors)."""
+    arrays = []
+    for a in host:
+        dtype = ti.types.vector(2, real) if a.ndim == 2 else real
+        d = ti.ndarray(dtype, shape=a.shape[0])
+        d.from_numpy(a.astype(np.float64 if real == ti.f64 else np.float32))
+        arrays.append(d)
+    return arrays
+
+
+def run_times(real, pos, vel, radius, tau, horizon):
+    arrays = device_arrays(real, pos, vel, radius, tau, horizon)
+    out = ti.ndarray(real, shape=horizon.shape[0])
+    times(*arrays, out, real)
+    return out.to_numpy()
 
 
 def pairs(rng, m):
@@ -66,14 +88,8 @@ def test_pair_time_of_impact_matches_the_reference_in_every_case(circles_cpu, se
     norm = np.linalg.norm(gap, axis=1, keepdims=True)
     pos[1:2 * k:2] = pos[0:2 * k:2] + gap / norm * (radius[0:2 * k:2] + radius[1:2 * k:2])[:, None] * 0.9
     tau[1:2 * k:2] = tau[0:2 * k:2]
-    arrays = []
-    for host, dtype, shape in ((pos, vec2, m * 2), (vel, vec2, m * 2), (radius, ti.f64, m * 2), (tau, ti.f64, m * 2)):
-        a = ti.ndarray(dtype, shape=shape)
-        a.from_numpy(host)
-        arrays.append(a)
-    out = ti.ndarray(ti.f64, shape=m)
-    times(*arrays, out)
-    got = out.to_numpy()
+    # A horizon far beyond every time: nothing is culled.
+    got = run_times(ti.f64, pos, vel, radius, tau, np.full(m, 1e30))
     want, doubtful = expected(pos, vel, radius, tau, m)
     sure = ~doubtful
     never = ~np.isfinite(want)
@@ -91,3 +107,48 @@ def test_pair_time_of_impact_matches_the_reference_in_every_case(circles_cpu, se
     hit = ~never & sure
     assert np.allclose(got[hit], want[hit], rtol=1e-9, atol=1e-9)
     assert math.isfinite(float(got[hit].max()))
+
+
+@pytest.mark.parametrize("real", ["f32", "f64"])
+def test_cull_keeps_every_time_up_to_the_horizon(circles_cpu, real):
+    """Pairs that meet, with horizons drawn around their times of impact: some a few units in
+    the last place before or after, some far. With the horizon, a time at or before it is the
+    same number as without one (bit for bit), and any other pair comes back after it. The
+    horizons cull most pairs (else the cull would not be tested)."""
+    real = {"f32": ti.f32, "f64": ti.f64}[real]
+    np_real = np.float32 if real == ti.f32 else np.float64
+    m = 20000
+    rng = np.random.default_rng(7)
+    pos, vel, radius, tau = pairs(rng, m)
+    # Half the pairs a hair apart and heading nearly straight at each other: their time of
+    # impact is close to c / (2 q), the cull's bound, so its margins are what keeps them.
+    k = m // 2
+    gap = pos[1:2 * k:2] - pos[0:2 * k:2]
+    unit = gap / np.linalg.norm(gap, axis=1, keepdims=True)
+    s = radius[0:2 * k:2] + radius[1:2 * k:2]
+    pos[1:2 * k:2] = pos[0:2 * k:2] + unit * (s * (1.0 + 10.0 ** rng.uniform(-7, -2, size=k)))[:, None]
+    vel[1:2 * k:2] = vel[0:2 * k:2] - unit * rng.uniform(0.5, 1.5, size=(k, 1)) + rng.normal(0, 1e-3, size=(k, 2))
+    tau[1:2 * k:2] = tau[0:2 * k:2]
+    free = run_times(real, pos, vel, radius, tau, np.full(m, 1e30))
+    t0 = np.maximum(tau[0::2], tau[1::2]).astype(np_real)
+    hits = free < 1e29
+    # Horizons: at the time of impact moved by -4..4 units in the last place, or at the later
+    # clock plus a random share of the time to impact (0 to 2), or at the later clock itself.
+    target = np.where(hits, free, t0 + 1.0).astype(np_real)
+    ulps = rng.integers(-4, 5, size=m)
+    near = target.copy()
+    for k in range(m):
+        step = np.inf if ulps[k] > 0 else -np.inf
+        for _ in range(abs(int(ulps[k]))):
+            near[k] = np.nextafter(near[k], np_real(step))
+    share = (t0 + (target - t0) * rng.uniform(0.0, 2.0, size=m)).astype(np_real)
+    kind = rng.integers(0, 3, size=m)
+    horizon = np.where(kind == 0, near, np.where(kind == 1, share, t0)).astype(np_real)
+    got = run_times(real, pos, vel, radius, tau, horizon)
+    kept = free <= horizon
+    assert kept.sum() > 2000 and (~kept & hits).sum() > 2000
+    assert np.array_equal(got[kept], free[kept])
+    assert np.all(got[~kept] > horizon[~kept])
+    # The cull drops most of the pairs that meet after their horizon (returned as NEVER).
+    dropped = got[~kept] >= np_real(1e29)
+    assert dropped.mean() > 0.5
