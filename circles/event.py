@@ -64,17 +64,19 @@ CULL_ABSOLUTE = 2.0 ** -20
 
 
 @ti.func
-def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), lo, hi, box, horizon, real: ti.template(), periodic: ti.template()):
+def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), lo, hi,
+                        box, horizon, real: ti.template(), periodic: ti.template()):
     """Time of impact of circles lo < hi, or NEVER; computed from lo's side only so both agree bit for bit.
 
     Most pairs of a search cannot meet before the horizon; their time is not computed (a square
     root and a division), and NEVER comes back for them. The cull is a bound, not an estimate:
     with T = horizon - t0 >= 0, q = -dx.dv > 0 and c = |dx|^2 - s^2, the gap squared
-    |dx + dv t|^2 - s^2 >= c - 2 q t stays positive up to the horizon when c > 2 q T, and then the computed
-    time, t0 + c / (q + sqrt(q^2 - |dv|^2 c)) >= t0 + c / (2 q), rounds above the horizon too
-    (margins CULL_RELATIVE and CULL_ABSOLUTE cover the round-off of every step). So a time at
-    or before the horizon is the same number with or without the cull, and a culled pair is
-    one whose time every caller rejects: the searches' results do not change, bit for bit."""
+    |dx + dv t|^2 - s^2 >= c - 2 q t stays positive up to the horizon when c > 2 q T, and then
+    the computed time, t0 + c / (q + sqrt(q^2 - |dv|^2 c)) >= t0 + c / (2 q), rounds above the
+    horizon too (margins CULL_RELATIVE and CULL_ABSOLUTE cover the round-off of every step). So
+    a time at or before the horizon is the same number with or without the cull, and a culled
+    pair is one whose time every caller rejects: the searches' results do not change, bit for
+    bit."""
     t0 = ti.max(tau[lo], tau[hi])
     xl = pos[lo] + vel[lo] * (t0 - tau[lo])
     xh = pos[hi] + vel[hi] * (t0 - tau[hi])

@@ -1,6 +1,7 @@
-"""The event scheme's pair time of impact, computed without branches, case by case against the
-test suite's own float64 formula (tests/reference.py): pairs that recede, approach and miss,
-approach and hit, and touch or overlap while approaching, with the two circles' clocks apart.
+"""The event scheme's pair time of impact, its cases computed without branches, case by case
+against the test suite's own float64 formula (tests/reference.py): pairs that recede, approach
+and miss, approach and hit, and touch or overlap while approaching, with the two circles'
+clocks apart.
 And its cull: with a horizon, a time at or before it is the same number as without one, and
 a pair left out is one that meets after it, in float32 and float64."""
 import math
@@ -12,9 +13,6 @@ import taichi as ti
 from circles import event
 from circles.geometry import NEVER
 from reference import time_of_impact
-
-vec2 = ti.types.vector(2, ti.f64)
-
 
 @ti.kernel
 def times(pos: ti.types.ndarray(ndim=1), vel: ti.types.ndarray(ndim=1), radius: ti.types.ndarray(ndim=1),
