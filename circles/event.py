@@ -87,12 +87,12 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     c = dx.dot(dx) - s * s
     never = ti.cast(NEVER, real)
     t = never
-    reach = (horizon - t0) * (1.0 + CULL_RELATIVE) + ti.abs(horizon) * CULL_ABSOLUTE
+    t_left = (horizon - t0) * (1.0 + CULL_RELATIVE) + ti.abs(horizon) * CULL_ABSOLUTE  # T, with the margins
     # Touching already or closing fast enough to touch by the horizon: one test, rarely passed
     # (a search's neighbours are mostly beyond reach), so its branch is well predicted; a
     # separate test of b < 0 first would be a coin toss. (Receding pairs that pass it get
     # NEVER below; with b >= 0 a pair passes only when it overlaps.)
-    if c + 2.0 * b * reach <= 0:
+    if c + 2.0 * b * t_left <= 0:
         a = dv.dot(dv)
         disc = b * b - a * c
         # Every case computed and the answer selected, with no branches: which case a pair falls

@@ -135,10 +135,10 @@ def test_cull_keeps_every_time_up_to_the_horizon(circles_cpu, real):
     target = np.where(hits, free, t0 + 1.0).astype(np_real)
     ulps = rng.integers(-4, 5, size=m)
     near = target.copy()
-    for k in range(m):
-        step = np.inf if ulps[k] > 0 else -np.inf
-        for _ in range(abs(int(ulps[k]))):
-            near[k] = np.nextafter(near[k], np_real(step))
+    toward = np.where(ulps > 0, np_real(np.inf), np_real(-np.inf))
+    for done in range(4):
+        more = np.abs(ulps) > done
+        near[more] = np.nextafter(near[more], toward[more])
     share = (t0 + (target - t0) * rng.uniform(0.0, 2.0, size=m)).astype(np_real)
     kind = rng.integers(0, 3, size=m)
     horizon = np.where(kind == 0, near, np.where(kind == 1, share, t0)).astype(np_real)
