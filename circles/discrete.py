@@ -47,10 +47,20 @@ R_CUT, R_MAX = 0, 1
 
 
 @ti.func
+def radius_of(i, radius: ti.template(), uniform: ti.template()):
+    """Circle i's radius; with `uniform` (every circle has the same radius and mass) the first
+    one's, which stays in the cache: a scene of equal circles reads no radius per circle."""
+    k = i
+    if ti.static(uniform):
+        k = 0
+    return radius[k]
+
+
+@ti.func
 def _moved(i, a: ti.template()):
     """Where circle i is after its move by v dt (wrapped into the box when periodic); a circle
     that ends up reaching past a wall is listed in `walled`. a = (pos, vel, radius, n_contacts,
-    walled, work, h, box_w, box_h, real, periodic)."""
+    walled, work, h, box_w, box_h, real, periodic, uniform)."""
     box = ti.Vector([a[7], a[8]], dt=a[9])
     x = a[0][i] + a[1][i] * a[6]
     if ti.static(a[10]):
@@ -59,7 +69,7 @@ def _moved(i, a: ti.template()):
             if x[k] >= box[k]:
                 x[k] -= box[k]
     else:
-        r = a[2][i]
+        r = radius_of(i, a[2], a[11])
         if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
             a[4][ti.atomic_add(a[5][WALLED], 1)] = i
     return x
@@ -76,7 +86,7 @@ def _keep_moved(i, x, a: ti.template()):
 def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_contacts: ti.template(),
           walled: ti.template(), work: ti.template(), cell_of: ti.template(), slot: ti.template(),
           cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy, inv_cw, inv_ch, dt, box_w,
-          box_h, real: ti.template(), periodic: ti.template(), serial: ti.template()):
+          box_h, real: ti.template(), periodic: ti.template(), uniform: ti.template(), serial: ti.template()):
     """x += v dt (wrapped into the box when periodic), counted into its grid cell; contact lists
     emptied in the same pass (see grid.enter_cells).
 
@@ -85,7 +95,7 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
     """
     work[WALLED] = 0
     enter_cells(pos.shape[0], _moved, _keep_moved,
-                (pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real, periodic),
+                (pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real, periodic, uniform),
                 cell_of, slot, cell_count, stray, parts, ncx, ncy, inv_cw, inv_ch, real, periodic, serial)
 
 
@@ -184,13 +194,14 @@ def _search_run(c, r, kx, ky, cell_start: ti.template(), ncx, ncy, segs, periodi
 
 @ti.func
 def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
-                    n_contacts: ti.template(), marked: ti.template(), rnd, box, periodic: ti.template()):
+                    n_contacts: ti.template(), marked: ti.template(), rnd, box, periodic: ti.template(),
+                    uniform: ti.template()):
     """Add j to i's contact list and i to j's when the two overlap (the test `_consider` makes);
     when they also approach, both are marked for the first round (`_listed`)."""
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
-    s = radius[lo] + radius[hi]
+    s = radius_of(lo, radius, uniform) + radius_of(hi, radius, uniform)
     if d.dot(d) < s * s:
         _record_overlap(lo, hi, d, vel, contacts, n_contacts, marked, rnd)
 
@@ -222,7 +233,7 @@ def _record_overlap(i, j, d, vel: ti.template(), contacts: ti.template(), n_cont
 def _contact_of(i, j, a: ti.template()):
     """`_record_contact` of the pair (i, j) as `geometry.pairs_once` visits it; `a` holds the
     other arguments."""
-    _record_contact(i, j, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8])
+    _record_contact(i, j, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9])
 
 
 @ti.func
@@ -230,7 +241,7 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                    n_contacts: ti.template(), marked: ti.template(), work: ti.template(),
                    cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
                    box_w, box_h, spread: ti.template(), large: ti.template(), real: ti.template(),
-                   periodic: ti.template(), two_level: ti.template(), serial: ti.template()):
+                   periodic: ti.template(), two_level: ti.template(), uniform: ti.template(), serial: ti.template()):
     """Fill the contact lists and mark the circles of the first round (`_listed`): every
     overlapping pair, found once, from the forward half of the cells of one of its circles
     (half the pair tests of a full 3 x 3 search). Contact lists start empty; this step's first
@@ -260,18 +271,18 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             # i's own values read once (a walled box: no images), each neighbour's straight
             # from its slot, with no min and max of the two before the loads.
             xi = pos[i]
-            ri = radius[i]
+            ri = radius_of(i, radius, uniform)
             for m in range(count):
                 k = own + 1 + m if m < n_a else b_lo + m - n_a
                 j = sorted_ids[k]
                 if not is_large(j, radius, spread, two_level):
                     d = pos[j] - xi
-                    s = ri + radius[j]
+                    s = ri + radius_of(j, radius, uniform)
                     if d.dot(d) < s * s:
                         _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
         else:
             pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
-                       (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic))
+                       (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform))
     if ti.static(two_level):
         ti.loop_config(serialize=serial)
         for a in range(work[NLARGE]):
@@ -285,12 +296,13 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
                 for k in range(k_lo, k_hi):
                     j = sorted_ids[k]
                     if j != i and (j > i or not is_large(j, radius, spread, two_level)):
-                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic)
+                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic,
+                                        uniform)
 
 
 @ti.func
 def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), ids: ti.template(), box,
-              best, best_p, periodic: ti.template()):
+              best, best_p, periodic: ti.template(), uniform: ti.template()):
     """The pick of i updated with its pair with j; returns (key, partner).
 
     Pairs order by (key, lower id, higher id) (`geometry.key_less`). For pairs of the same
@@ -299,7 +311,7 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
-    s = radius[lo] + radius[hi]
+    s = radius_of(lo, radius, uniform) + radius_of(hi, radius, uniform)
     dist2 = d.dot(d)
     overlapping = dist2 < s * s
     if overlapping:
@@ -325,7 +337,7 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
           contacts: ti.template(), n_contacts: ti.template(),
           lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
           sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-          real: ti.template(), periodic: ti.template(), two_level: ti.template(), side,
+          real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(), side,
           marked: ti.template(), every: ti.template(), serial: ti.template()):
     """Each circle on this round's work list picks its overlapping approaching pair of smallest key.
 
@@ -353,12 +365,14 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
                 # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
                 # (no other circle overlaps them, so none reads their picks this step).
                 if i < first:
-                    _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic)
+                    _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic, uniform)
                     if p == first:
-                        _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic)
+                        _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic,
+                                 uniform)
             elif listed <= cap:
                 for m in range(listed):
-                    best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic)
+                    best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic,
+                                             uniform)
             else:
                 c = cell_of[i]
                 kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
@@ -367,7 +381,8 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
                     for k in range(k_lo, k_hi):
                         j = sorted_ids[k]
                         if j != i:
-                            best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic)
+                            best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic,
+                                                     uniform)
             # In the first round a circle that picked no partner (one of an isolated pair, or
             # one with no approaching overlap: most of them) writes nothing. That round's resolve
             # takes only circles whose `picked` is the round, and no circle picks it then. A
@@ -384,7 +399,7 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
                         lists: ti.template(), work: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
                         cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
                         segs, box, spread: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                        side):
+                        uniform: ti.template(), side):
     """List i and every circle overlapping it for a new pick in round `rnd`.
 
     Positions do not move between rounds, so only pairs with i can change their key when i's
@@ -414,7 +429,7 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 d = displacement(pos[i], pos[j], box, periodic)
-                s = radius[i] + radius[j]
+                s = radius_of(i, radius, uniform) + radius_of(j, radius, uniform)
                 if d.dot(d) < s * s:
                     _enlist(j, rnd, marked, lists, work, side)
 
@@ -425,7 +440,7 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
                       contacts: ti.template(), n_contacts: ti.template(), cell_of: ti.template(),
                       cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
                       spread: ti.template(), real: ti.template(), periodic: ti.template(),
-                      two_level: ti.template(), side):
+                      two_level: ti.template(), uniform: ti.template(), side):
     """x's velocity changed in its pair with y: list what must pick again in round `rnd`.
 
     Most circles overlap only their partner. Such a circle's next pick is made here, from that
@@ -433,16 +448,17 @@ def _after_resolution(x, y, rnd, pos: ti.template(), vel: ti.template(), radius:
     changes before then), and it is not listed; its partner lists what it overlaps.
     """
     if n_contacts[x] == 1:
-        _, p = _consider(x, y, pos, vel, radius, ids, box, ti.cast(NEVER, real), -1, periodic)
+        _, p = _consider(x, y, pos, vel, radius, ids, box, ti.cast(NEVER, real), -1, periodic, uniform)
         partner[x] = p
     else:
         _enlist_overlapping(x, rnd, pos, radius, marked, lists, work, contacts, n_contacts, cell_of, cell_start,
-                            sorted_ids, ncx, ncy, rows, segs, box, spread, periodic, two_level, side)
+                            sorted_ids, ncx, ncy, rows, segs, box, spread, periodic, two_level, uniform, side)
 
 
 @ti.func
 def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-             ids: ti.template(), pair_count: ti.template(), virial: ti.template(), box, periodic: ti.template()):
+             ids: ti.template(), pair_count: ti.template(), virial: ti.template(), box, periodic: ti.template(),
+             uniform: ti.template()):
     """The elastic impulse of the pair (i, j), i its lower slot, when it approaches; returns
     whether it did. Plain updates, not atomics: a circle is in at most one executed pair per
     round."""
@@ -451,15 +467,15 @@ def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template()
     vn = (vel[j] - vel[i]).dot(nrm)
     hit = vn < 0
     if hit:
-        wi = inv_mass[i]
-        wj = inv_mass[j]
+        wi = radius_of(i, inv_mass, uniform)
+        wj = radius_of(j, inv_mass, uniform)
         jmp = 2.0 * vn / (wi + wj)
         # Same expression for both circles: rounding does not depend on which one is i.
         vel[i] = vel[i] + (wi * jmp) * nrm
         vel[j] = vel[j] + (wj * jmp) * (-nrm)
         owner = i if ids[i] < ids[j] else j
         pair_count[owner] = pair_count[owner] + 1
-        virial[owner] = virial[owner] + ti.cast(radius[i] + radius[j], ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+        virial[owner] = virial[owner] + ti.cast(radius_of(i, radius, uniform) + radius_of(j, radius, uniform), ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
     return hit
 
 
@@ -469,7 +485,7 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
              lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
              sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
-             real: ti.template(), periodic: ti.template(), two_level: ti.template(), side,
+             real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(), side,
              every: ti.template(), serial: ti.template()):
     """Resolve the mutual approaching picks that involve a circle of this round's list, and list
     the circles whose picks that changes for the next round (the other list, which is empty on
@@ -485,13 +501,13 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
         # A mutual pair is resolved by its lower index when both picked this round, else by the
         # one that did (the other's pick is older and still holds).
         if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
-            if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic):
+            if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic, uniform):
                 _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
-                                  real, periodic, two_level, 1 - side)
+                                  real, periodic, two_level, uniform, 1 - side)
                 _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
                                   n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
-                                  real, periodic, two_level, 1 - side)
+                                  real, periodic, two_level, uniform, 1 - side)
     # One serial statement group between rounds (each group is a task of its own).
     work[ROUND] += 1
     work[LIST0 + side] = 0
@@ -499,12 +515,12 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
 
 @ti.func
 def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-          wall_count: ti.template(), wall_impulse: ti.template(), box):
+          wall_count: ti.template(), wall_impulse: ti.template(), box, uniform: ti.template()):
     """Reflect circle i off the walls it reaches past: mirror the position, and flip the normal
     velocity when it points outwards."""
     x = pos[i]
     v = vel[i]
-    r = radius[i]
+    r = radius_of(i, radius, uniform)
     for a in ti.static(range(2)):
         lo = r
         hi = box[a] - r
@@ -521,7 +537,7 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
                 v[a] = -v[a]
         if hit:
             wall_count[i] = wall_count[i] + 1
-            wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+            wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(radius_of(i, inv_mass, uniform), ti.f64)
     pos[i] = x
     vel[i] = v
 
@@ -529,7 +545,8 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
 @ti.func
 def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
            wall_count: ti.template(), wall_impulse: ti.template(), walled: ti.template(), work: ti.template(),
-           box_w, box_h, real: ti.template(), settled_only: ti.template(), serial: ti.template()):
+           box_w, box_h, real: ti.template(), uniform: ti.template(), settled_only: ti.template(),
+           serial: ti.template()):
     """The wall reflections of the listed circles; with `settled_only`, only when the rounds are
     over (the next round's list, list 0 after an even number of rounds, is empty; otherwise
     more rounds come first)."""
@@ -537,14 +554,15 @@ def _walls(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_ma
     for k in range(work[WALLED]):
         box = ti.Vector([box_w, box_h], dt=real)
         if not ti.static(settled_only) or work[LIST0] == 0:
-            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box)
+            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box, uniform)
 
 
 @launch.kernel
 def walls(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, wall_count: ndarr, wall_impulse: ndarr,
-          walled: ndarr, work: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template()):
+          walled: ndarr, work: ndarr, box_w: ti.f64, box_h: ti.f64, real: ti.template(), uniform: ti.template()):
     """The wall reflections after rounds that stopped at the round limit."""
-    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, False, False)
+    _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, uniform, False,
+           False)
 
 
 @ti.func
@@ -554,7 +572,7 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
             spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-            rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
+            uniform: ti.template(), rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
     """`rounds` rounds of pick and resolve, alternating between the two work lists (`rounds` is
     even, so every launch starts on list 0); a round after one that listed nothing has an
     empty list, so it costs two empty loops. With `first_every` the first round loops over
@@ -572,19 +590,19 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
         serial = ti.static(r >= serial_from)
         _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
               cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level,
-              r % 2, marked, every, serial)
+              uniform, r % 2, marked, every, serial)
         _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
                  lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-                 periodic, two_level, r % 2, every, serial)
+                 periodic, two_level, uniform, r % 2, every, serial)
     if ti.static(unrolled < rounds):
         ti.loop_config(serialize=True)
         for r in range(unrolled, rounds):
             _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists,
                   work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic,
-                  two_level, r % 2, marked, False, True)
+                  two_level, uniform, r % 2, marked, False, True)
             _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
                      n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
-                     spread, real, periodic, two_level, r % 2, False, True)
+                     spread, real, periodic, two_level, uniform, r % 2, False, True)
 
 
 @ti.func
@@ -595,14 +613,15 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        wall_impulse: ti.template(), walled: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
                        spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-                       rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
+                       uniform: ti.template(), rounds: ti.template(), first_every: ti.template(),
+                       serial_from: ti.template()):
     """`rounds` rounds, then the wall reflections if they settled (the end of both launches);
     the walls' loop is serial when the last round's is (a few circles per thousand reach a wall)."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
             pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-            periodic, two_level, rounds, first_every, serial_from)
+            periodic, two_level, uniform, rounds, first_every, serial_from)
     if ti.static(not periodic):
-        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, True,
+        _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, uniform, True,
                serial_from < rounds)
 
 
@@ -613,22 +632,24 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
                segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
-               real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+               real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(),
                rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
     thousand circles). Returns the length of the next round's work list: not 0 when more
-    rounds are needed (the walls wait for them)."""
+    rounds are needed (the walls wait for them). With `uniform`, every circle has the radius
+    and the mass of the first (`radius_of`)."""
     # serial_from = 0: the whole step on one thread (see backend.SERIAL_N).
     serial = ti.static(serial_from == 0)
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
-          inv_ch, dt, box_w, box_h, real, periodic, serial)
+          inv_ch, dt, box_w, box_h, real, periodic, uniform, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start,
-                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, serial)
+                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, uniform,
+                   serial)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, True, serial_from)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, True, serial_from)
     return work[LIST0]
 
 
@@ -638,12 +659,12 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
                 lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                 wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, spread: ndarr,
-                real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+                real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(),
                 rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, rounds, False, serial_from)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, False, serial_from)
     return work[LIST0]
 
 

@@ -65,6 +65,10 @@ MAX_BOUND_SWEEPS = 10_000
 #: Overlapping neighbours a circle remembers within a discrete step (more: it searches its
 #: cells); at most discrete.MOST_CONTACTS.
 DISCRETE_CONTACTS = 4
+#: The discrete scheme on circles that all share one radius and one mass reads the first
+#: circle's (`discrete.radius_of`), not each circle's: the same numbers, fewer loads. False:
+#: every scene reads them per circle (for tests that compare the two).
+DISCRETE_UNIFORM = True
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
 #: Two-level grid in a walled box (the discrete scheme, and the event scheme's queue): circles
@@ -282,6 +286,10 @@ class Simulation:
             for arr in (self._picked, self._marked):
                 reductions.fill_i32(arr, 0)
             self._setup_two_level(True)
+            # As the kernels see them: radii and inverse masses rounded to the precision.
+            radii = self._radius.astype(self._np_real)
+            inv_mass = (1.0 / self._mass).astype(self._np_real)
+            self._uniform = DISCRETE_UNIFORM and bool(np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]))
 
     def _setup_parts(self):
         """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, with one
@@ -754,21 +762,22 @@ class Simulation:
         two = self._two_level
         parallel = self._parallel_rounds
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
-                                   real, periodic, two,
+                                   real, periodic, two, self._uniform,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
         self.grid.complete = True
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
             more = min(DISCRETE_FUSED_ROUNDS, DISCRETE_MAX_ROUNDS - done)
-            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._spread, real, periodic, two, more,
+            busy = discrete.more_rounds(*arrays, *self.grid.args(), w, hgt, self._spread, real, periodic, two,
+                                        self._uniform, more,
                                         min(max(parallel - done, 0), more))
             done += more
         self.rounds += done
         if busy and not periodic:
             # The round limit was reached: the walls were left for rounds that did not come.
             discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
-                           self._walled, self._work, w, hgt, real)
+                           self._walled, self._work, w, hgt, real, self._uniform)
         return h
 
     def _set_scalars(self, a, b):

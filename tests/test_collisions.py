@@ -265,3 +265,38 @@ def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):
     assert pairs_a == pairs_b > 1000
     np.testing.assert_array_equal(a.pos, b.pos)
     np.testing.assert_array_equal(a.vel, b.vel)
+
+
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatch, boundary):
+    """A discrete scene whose circles share one radius and one mass reads the first circle's
+    (`discrete.radius_of`): the run must be the same bit for bit as one that reads each
+    circle's, on a dense, fast scene whose circles overlap several others at once (contact
+    lists that overflow into cell searches) and hit the walls. Equal radii with unequal
+    masses read per circle (test_unequal_masses_follow_1d_formula checks their outcome)."""
+    from circles import simulation
+    scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=0.007, speed=(2.0, 6.0), scheme="discrete",
+                              precision="f32", seed=5, dt=0.002, boundary=boundary)
+    runs = []
+    for uniform in (True, False):
+        monkeypatch.setattr(simulation, "DISCRETE_UNIFORM", uniform)
+        sim = circles_cpu.Simulation(scene)
+        assert sim._uniform == uniform
+        crowded = 0
+        for _ in range(12):
+            sim.step(1)
+            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
+        runs.append((sim.state(), sim.stats(), crowded))
+    (a, st_a, crowded_a), (b, st_b, crowded_b) = runs
+    assert crowded_a == crowded_b > 0
+    assert st_a["pair_collisions"] == st_b["pair_collisions"] > 1000
+    for key in ("wall_collisions", "virial", "wall_impulse"):
+        assert st_a[key] == st_b[key]
+    if boundary == "walls":
+        assert st_a["wall_collisions"] > 50
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
+    pos = np.array([[0.3, 0.5], [0.7, 0.5]])
+    unequal = circles_cpu.Simulation.from_arrays(pos, np.zeros((2, 2)), np.array([R, R]), mass=np.array([1.0, 3.0]),
+                                                 box=BOX, scheme="discrete")
+    assert not unequal._uniform
