@@ -48,8 +48,9 @@ R_CUT, R_MAX = 0, 1
 
 @ti.func
 def radius_of(i, radius: ti.template(), uniform: ti.template()):
-    """Circle i's radius; with `uniform` (every circle has the same radius and mass) the first
-    one's, which stays in the cache: a scene of equal circles reads no radius per circle."""
+    """Circle i's entry of `radius` (or of any per-circle array that `uniform` covers: the
+    inverse masses too); with `uniform` (every circle has the same radius and mass) the first
+    circle's, which stays in the cache: a scene of equal circles reads none per circle."""
     k = i
     if ti.static(uniform):
         k = 0
@@ -475,7 +476,8 @@ def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template()
         vel[j] = vel[j] + (wj * jmp) * (-nrm)
         owner = i if ids[i] < ids[j] else j
         pair_count[owner] = pair_count[owner] + 1
-        virial[owner] = virial[owner] + ti.cast(radius_of(i, radius, uniform) + radius_of(j, radius, uniform), ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
+        virial[owner] = virial[owner] + (ti.cast(radius_of(i, radius, uniform) + radius_of(j, radius, uniform), ti.f64)
+                                         * ti.abs(ti.cast(jmp, ti.f64)))
     return hit
 
 
@@ -537,7 +539,8 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
                 v[a] = -v[a]
         if hit:
             wall_count[i] = wall_count[i] + 1
-            wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(v[a], ti.f64)) / ti.cast(radius_of(i, inv_mass, uniform), ti.f64)
+            wall_impulse[i] = wall_impulse[i] + (2.0 * ti.abs(ti.cast(v[a], ti.f64))
+                                                 / ti.cast(radius_of(i, inv_mass, uniform), ti.f64))
     pos[i] = x
     vel[i] = v
 
