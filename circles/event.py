@@ -77,12 +77,44 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     a time at or before the horizon is the same number with or without the cull, and a culled
     pair is one whose time every caller rejects: the searches' results do not change, bit for
     bit."""
-    t0 = ti.max(tau[lo], tau[hi])
-    xl = pos[lo] + vel[lo] * (t0 - tau[lo])
-    xh = pos[hi] + vel[hi] * (t0 - tau[hi])
-    dx = displacement(xl, xh, box, periodic)
-    dv = vel[hi] - vel[lo]
-    s = radius[lo] + radius[hi]
+    return _time_of_impact(own_values(lo, pos, vel, radius, tau), own_values(hi, pos, vel, radius, tau), box,
+                           horizon, real, periodic)
+
+
+@ti.func
+def own_values(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template()):
+    """(tau, x, v, r) of circle i: what its pair times read of it (`pair_time`)."""
+    return tau[i], pos[i], vel[i], radius[i]
+
+
+@ti.func
+def pair_time(i, own: ti.template(), j, pos: ti.template(), vel: ti.template(), radius: ti.template(),
+              tau: ti.template(), box, horizon, real: ti.template(), periodic: ti.template()):
+    """`pair_time_of_impact` of circles i and j, with i's values `own` (`own_values`) read once by
+    a search. In a walled box from i's side: dx and dv are then the exact negations of the lower
+    slot's (a difference of two floats negates exactly), and every product and sum below is the
+    same number for either sign, so both circles get the time bit for bit. In a periodic box
+    from the lower slot's side (the minimum image of a displacement of half the box is not the
+    negation of the other's)."""
+    t = ti.cast(NEVER, real)
+    if ti.static(periodic):
+        t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, horizon, real, periodic)
+    else:
+        t = _time_of_impact(own, own_values(j, pos, vel, radius, tau), box, horizon, real, periodic)
+    return t
+
+
+@ti.func
+def _time_of_impact(u: ti.template(), w: ti.template(), box, horizon, real: ti.template(),
+                    periodic: ti.template()):
+    """The time of impact of two circles of values u and w (`own_values`), as
+    `pair_time_of_impact` describes it."""
+    t0 = ti.max(u[0], w[0])
+    xu = u[1] + u[2] * (t0 - u[0])
+    xw = w[1] + w[2] * (t0 - w[0])
+    dx = displacement(xu, xw, box, periodic)
+    dv = w[2] - u[2]
+    s = u[3] + w[3]
     b = dx.dot(dv)
     c = dx.dot(dx) - s * s
     never = ti.cast(NEVER, real)
@@ -248,6 +280,7 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                                                             best_lo, best_hi, best_p)
     c = cell_of[i]
     mine = _own_part(i, part)
+    own = own_values(i, pos, vel, radius, tau)
     runs, kx, ky = _runs(i, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
     for r in range(runs):
         k_lo, k_hi, coarse = _run(r, c, kx, ky, cell_start, coarse_start, ncx, ncy, segs, ncx_c, ncy_c, mx, my,
@@ -273,9 +306,8 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
                             pending += 1
                         else:
                             moved[j] = code
-                # From the pair's lower slot, so that both circles get the time bit for bit.
-                t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, horizon, real,
-                                       periodic)
+                # The same number as from j's side, bit for bit (`pair_time`).
+                t = pair_time(i, own, j, pos, vel, radius, tau, box, horizon, real, periodic)
                 if t <= horizon:
                     # The key (creation ids, so that ties break the same whatever the memory
                     # order), read only for the few pairs within the horizon.
@@ -341,9 +373,9 @@ def _offer(j, i, t, klo, khi, ev_t: ti.template(), ev_p: ti.template(), ids: ti.
 def _pair_once(i, j, a: ti.template()):
     """The pair (i, j) offered to both circles (`_offer`) when it meets within the horizon, as
     `geometry.pairs_once` visits it; `a` holds (pos, vel, radius, tau, ids, ev_t, ev_p, box,
-    horizon, real, periodic)."""
+    horizon, real, periodic, i's `own_values`), the last read once for all of i's pairs."""
     n = a[0].shape[0]
-    t = pair_time_of_impact(a[0], a[1], a[2], a[3], ti.min(i, j), ti.max(i, j), a[7], a[8], a[9], a[10])
+    t = pair_time(i, a[11], j, a[0], a[1], a[2], a[3], a[7], a[8], a[9], a[10])
     if t <= a[8]:
         klo = ti.min(a[4][i], a[4][j])
         khi = ti.max(a[4][i], a[4][j])
@@ -376,7 +408,8 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
         box = ti.Vector([box_w, box_h], dt=real)
         i = sorted_ids[own]
         pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _pair_once,
-                   (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic))
+                   (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic,
+                    own_values(i, pos, vel, radius, tau)))
 
 
 @ti.func
@@ -1313,13 +1346,13 @@ def _member(q, k, s_hi, c0, label: ti.template(), claimed: ti.template(), sorted
 
 @ti.func
 def _pair_in_part(i, j, a: ti.template()):
-    """`_pair_once` for a pair within part a[12] (labels a[11]); a pair across two parts, which
-    cannot meet within the window, flags both circles touched and dirty, a[13] and a[14]
+    """`_pair_once` for a pair within part a[13] (labels a[12]); a pair across two parts, which
+    cannot meet within the window, flags both circles touched and dirty, a[14] and a[15]
     (`repredict` searches them in full before the next window)."""
-    if _own_part(j, (a[11],)) == a[12]:
+    if _own_part(j, (a[12],)) == a[13]:
         _pair_once(i, j, a)
     else:
-        for f in ti.static(range(13, 15)):
+        for f in ti.static(range(14, 16)):
             a[f][i] = 1
             a[f][j] = 1
 
@@ -1409,7 +1442,9 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                         if take:
                             pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, rows, segs,
                                        periodic, _pair_in_part, (pos, vel, radius, tau, ids, ev_t, ev_p, box,
-                                                                 horizon, real, periodic, label, k, touched, dirty))
+                                                                 horizon, real, periodic,
+                                                                 own_values(i, pos, vel, radius, tau), label, k,
+                                                                 touched, dirty))
                 size = 0
                 for q in range(s_lo, items):
                     s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)

@@ -3,7 +3,9 @@ against the test suite's own float64 formula (tests/reference.py): pairs that re
 and miss, approach and hit, and touch or overlap while approaching, with the two circles'
 clocks apart.
 And its cull: with a horizon, a time at or before it is the same number as without one, and
-a pair left out is one that meets after it, in float32 and float64."""
+a pair left out is one that meets after it, in float32 and float64. A search reads its own
+circle's values once and computes each pair from its side (`event.pair_time`): in a walled box
+the same number from either circle, bit for bit."""
 import math
 
 import numpy as np
@@ -22,6 +24,22 @@ def times(pos: ti.types.ndarray(ndim=1), vel: ti.types.ndarray(ndim=1), radius: 
     box = ti.Vector([1e9, 1e9], dt=real)
     for p in range(out.shape[0]):
         out[p] = event.pair_time_of_impact(pos, vel, radius, tau, 2 * p, 2 * p + 1, box, horizon[p], real, False)
+
+
+@ti.kernel
+def times_from_each_side(pos: ti.types.ndarray(ndim=1), vel: ti.types.ndarray(ndim=1),
+                         radius: ti.types.ndarray(ndim=1), tau: ti.types.ndarray(ndim=1),
+                         horizon: ti.types.ndarray(ndim=1), out: ti.types.ndarray(ndim=2), real: ti.template()):
+    """Pair p's time (circles 2p and 2p + 1) from the lower slot's side (`pair_time_of_impact`),
+    and as a search of each circle computes it (`pair_time`)."""
+    box = ti.Vector([1e9, 1e9], dt=real)
+    for p in range(out.shape[1]):
+        lo, hi = 2 * p, 2 * p + 1
+        out[0, p] = event.pair_time_of_impact(pos, vel, radius, tau, lo, hi, box, horizon[p], real, False)
+        out[1, p] = event.pair_time(lo, event.own_values(lo, pos, vel, radius, tau), hi, pos, vel, radius, tau, box,
+                                    horizon[p], real, False)
+        out[2, p] = event.pair_time(hi, event.own_values(hi, pos, vel, radius, tau), lo, pos, vel, radius, tau, box,
+                                    horizon[p], real, False)
 
 
 def device_arrays(real, *host):
@@ -150,3 +168,32 @@ def test_cull_keeps_every_time_up_to_the_horizon(circles_cpu, real):
     # The cull drops most of the pairs that meet after their horizon (returned as NEVER).
     dropped = got[~kept] >= np_real(1e29)
     assert dropped.mean() > 0.5
+
+
+@pytest.mark.parametrize("real", ["f32", "f64"])
+def test_pair_time_is_the_same_from_either_circle(circles_cpu, real):
+    """Both circles of a pair must agree on its time bit for bit (each offers it to the other,
+    and an event is executed when both chose it). Pairs of every case (receding, missing,
+    hitting, touching, a hair apart and closing head on) with clocks apart, horizons far and
+    near: the time from the higher slot's side, with its own values read once, is the lower
+    slot's number, NEVER included."""
+    real = {"f32": ti.f32, "f64": ti.f64}[real]
+    np_real = np.float32 if real == ti.f32 else np.float64
+    m = 20000
+    rng = np.random.default_rng(11)
+    pos, vel, radius, tau = pairs(rng, m)
+    k = m // 4
+    gap = pos[1:2 * k:2] - pos[0:2 * k:2]
+    unit = gap / np.linalg.norm(gap, axis=1, keepdims=True)
+    s = radius[0:2 * k:2] + radius[1:2 * k:2]
+    pos[1:2 * k:2] = pos[0:2 * k:2] + unit * (s * (1.0 + 10.0 ** rng.uniform(-7, -2, size=k)))[:, None]
+    vel[1:2 * k:2] = vel[0:2 * k:2] - unit * rng.uniform(0.5, 1.5, size=(k, 1))
+    horizon = np.where(rng.random(m) < 0.5, 1e30, rng.uniform(0.0, 3.0, size=m))
+    arrays = device_arrays(real, pos, vel, radius, tau, horizon)
+    out = ti.ndarray(real, shape=(3, m))
+    times_from_each_side(*arrays, out, real)
+    got = out.to_numpy()
+    met = got[0] < np_real(1e29)
+    assert met.sum() > 3000 and (~met).sum() > 3000
+    assert np.array_equal(got[1], got[0])
+    assert np.array_equal(got[2], got[0])
