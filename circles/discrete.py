@@ -10,7 +10,8 @@ first round only circles overlapping a resolved circle pick again; the others' p
 
 What a step touches: every circle once to move and once to sort into the grid and search the
 forward half of its neighbour cells for overlaps (each pair is tested once); the first round
-reads a mark of every circle and works on those with an approaching overlap, later rounds
+reads a mark of every circle and works on those with an approaching overlap (on a CPU each
+thread first lists its part's marked circles, `_first_round_in_parts`), later rounds
 visit only the circles listed as overlapping a resolved one, and the walls only the circles
 the move left reaching past a wall.
 
@@ -30,14 +31,15 @@ import taichi as ti
 from . import launch
 from .geometry import (NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, run_parts,
                        wide_row)
-from .grid import enter_cells, finish_cells
+from .grid import PART_ITERATIONS, _part_range, count_parts, enter_cells, finish_cells
 
 ndarr = ti.types.ndarray(ndim=1)
 
 
 #: Slots of the `work` array: the round number, the lengths of the two work lists, the
-#: number of circles reaching past a wall, and the number of large circles (two-level grid).
-ROUND, LIST0, LIST1, WALLED, NLARGE = 0, 1, 2, 3, 4
+#: number of circles reaching past a wall, the number of large circles (two-level grid), and
+#: from PART_PICKS on, one per CPU part, the picks of the part's first round (`_first_round_in_parts`).
+ROUND, LIST0, LIST1, WALLED, NLARGE, PART_PICKS = 0, 1, 2, 3, 4, 5
 #: The longest contact list a circle may have (simulation.DISCRETE_CONTACTS is its length):
 #: `_enlist_overlapping` keeps a circle and its contacts in a local vector.
 MOST_CONTACTS = 7
@@ -333,6 +335,50 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
 
 
 @ti.func
+def _pick_one(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+              ids: ti.template(), pair_count: ti.template(), virial: ti.template(), contacts: ti.template(),
+              n_contacts: ti.template(), cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(),
+              ncx, ncy, rows, segs, box, spread: ti.template(), real: ti.template(), periodic: ti.template(),
+              two_level: ti.template(), uniform: ti.template()):
+    """Circle i's pick (`_pick`): the partner of its overlapping approaching pair of smallest
+    key, or -1 (none, or one of an isolated pair, which is resolved here)."""
+    cap = contacts.shape[0]
+    best = ti.cast(NEVER, real)
+    best_p = -1
+    listed = n_contacts[i]
+    first = -1
+    if listed == 1:
+        first = contacts[0, i]
+        if n_contacts[first] != 1:
+            first = -1
+    if first >= 0:
+        # An isolated pair (each circle overlaps only the other; most pairs are): the two
+        # picks are each other exactly when they approach, so the lower slot resolves the
+        # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
+        # (no other circle overlaps them, so none reads their picks this step).
+        if i < first:
+            _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic, uniform)
+            if p == first:
+                _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic,
+                         uniform)
+    elif listed <= cap:
+        for m in range(listed):
+            best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic,
+                                     uniform)
+    else:
+        c = cell_of[i]
+        kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
+        for r in range(runs):
+            k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if j != i:
+                    best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic,
+                                             uniform)
+    return best_p
+
+
+@ti.func
 def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(), ids: ti.template(),
           partner: ti.template(), picked: ti.template(), pair_count: ti.template(), virial: ti.template(),
           contacts: ti.template(), n_contacts: ti.template(),
@@ -346,44 +392,14 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
     within a step. A circle with more contacts than the list holds searches its cells (`_search_runs`).
     Circles off the list keep their picks: nothing about their pairs changed (see `_resolve`).
     """
-    cap = contacts.shape[0]
     ti.loop_config(serialize=serial)
     for a in range(_round_items(work, side, pos.shape[0], every)):
         box = ti.Vector([box_w, box_h], dt=real)
         i, take = _listed(a, work[ROUND], marked, lists, side, every)
         if take:
-            best = ti.cast(NEVER, real)
-            best_p = -1
-            listed = n_contacts[i]
-            first = -1
-            if listed == 1:
-                first = contacts[0, i]
-                if n_contacts[first] != 1:
-                    first = -1
-            if first >= 0:
-                # An isolated pair (each circle overlaps only the other; most pairs are): the two
-                # picks are each other exactly when they approach, so the lower slot resolves the
-                # pair here, as `_resolve` would, and neither circle needs a pick for later rounds
-                # (no other circle overlaps them, so none reads their picks this step).
-                if i < first:
-                    _, p = _consider(i, first, pos, vel, radius, ids, box, best, best_p, periodic, uniform)
-                    if p == first:
-                        _collide(i, first, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic,
-                                 uniform)
-            elif listed <= cap:
-                for m in range(listed):
-                    best, best_p = _consider(i, contacts[m, i], pos, vel, radius, ids, box, best, best_p, periodic,
-                                             uniform)
-            else:
-                c = cell_of[i]
-                kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
-                for r in range(runs):
-                    k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
-                    for k in range(k_lo, k_hi):
-                        j = sorted_ids[k]
-                        if j != i:
-                            best, best_p = _consider(i, j, pos, vel, radius, ids, box, best, best_p, periodic,
-                                                     uniform)
+            best_p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
+                               cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level,
+                               uniform)
             # In the first round a circle that picked no partner (one of an isolated pair, or
             # one with no approaching overlap: most of them) writes nothing. That round's resolve
             # takes only circles whose `picked` is the round, and no circle picks it then. A
@@ -482,6 +498,80 @@ def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template()
 
 
 @ti.func
+def _resolve_one(i, rnd, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                 ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+                 virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+                 lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+                 sorted_ids: ti.template(), ncx, ncy, rows, segs, box, spread: ti.template(), real: ti.template(),
+                 periodic: ti.template(), two_level: ti.template(), uniform: ti.template(), side):
+    """`_resolve` of circle i, which picked in round `rnd`: its pair resolved when the pick is
+    mutual, by its lower index when both picked this round, else by the one that did (the
+    other's pick is older and still holds)."""
+    j = partner[i]
+    if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
+        if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic, uniform):
+            _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
+                              n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real,
+                              periodic, two_level, uniform, 1 - side)
+            _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
+                              n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real,
+                              periodic, two_level, uniform, 1 - side)
+
+
+@ti.func
+def _first_round_in_parts(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                          ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+                          virial: ti.template(), marked: ti.template(), contacts: ti.template(),
+                          n_contacts: ti.template(), lists: ti.template(), work: ti.template(), cell_of: ti.template(),
+                          cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+                          spread: ti.template(), real: ti.template(), periodic: ti.template(),
+                          two_level: ti.template(), uniform: ti.template()):
+    """A step's first round (list 0) on a CPU, in one part of the circles per thread
+    (`grid.count_parts`): each part lists its circles marked for the round (a store per
+    circle, and a length that grows by the mark's test, with no branch), picks for them
+    (`_pick_one`) and keeps in place the ones that picked a partner (work[PART_PICKS + k] of
+    them); then each part resolves its kept ones (`_resolve_one`). The same picks and the same
+    resolutions as `_pick` and `_resolve` over every circle, which took each circle's mark
+    through a branch."""
+    np_ = ti.static(count_parts())
+    n = pos.shape[0]
+    for it in range(np_ * PART_ITERATIONS):
+        if it % PART_ITERATIONS == 0:
+            box = ti.Vector([box_w, box_h], dt=real)
+            k = it // PART_ITERATIONS
+            lo, hi = _part_range(n, k, np_)
+            rnd = work[ROUND]
+            m = lo
+            for a in range(lo, hi):
+                lists[0, m] = a
+                m += ti.select(marked[a] == rnd, 1, 0)
+            kept = lo
+            for q in range(lo, m):
+                i = lists[0, q]
+                p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
+                              cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level,
+                              uniform)
+                if p >= 0:
+                    partner[i] = p
+                    picked[i] = rnd
+                    lists[0, kept] = i
+                    kept += 1
+            work[PART_PICKS + k] = kept - lo
+    for it in range(np_ * PART_ITERATIONS):
+        if it % PART_ITERATIONS == 0:
+            box = ti.Vector([box_w, box_h], dt=real)
+            k = it // PART_ITERATIONS
+            lo, hi = _part_range(n, k, np_)
+            rnd = work[ROUND]
+            for q in range(lo, lo + work[PART_PICKS + k]):
+                _resolve_one(lists[0, q], rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial,
+                             marked, contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy,
+                             rows, segs, box, spread, real, periodic, two_level, uniform, 0)
+    work[ROUND] += 1
+    work[LIST0] = 0
+
+
+@ti.func
 def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
              ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
              virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
@@ -497,19 +587,10 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
         box = ti.Vector([box_w, box_h], dt=real)
         rnd = work[ROUND]
         i, take = _listed(a, rnd, picked, lists, side, every)
-        j = -1
         if take:
-            j = partner[i]
-        # A mutual pair is resolved by its lower index when both picked this round, else by the
-        # one that did (the other's pick is older and still holds).
-        if j >= 0 and partner[j] == i and (j > i or picked[j] != rnd):
-            if _collide(i, j, pos, vel, radius, inv_mass, ids, pair_count, virial, box, periodic, uniform):
-                _after_resolution(i, j, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
-                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
-                                  real, periodic, two_level, uniform, 1 - side)
-                _after_resolution(j, i, rnd + 1, pos, vel, radius, ids, partner, marked, lists, work, contacts,
-                                  n_contacts, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread,
-                                  real, periodic, two_level, uniform, 1 - side)
+            _resolve_one(i, rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked,
+                         contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
+                         box, spread, real, periodic, two_level, uniform, side)
     # One serial statement group between rounds (each group is a task of its own).
     work[ROUND] += 1
     work[LIST0 + side] = 0
@@ -575,7 +656,8 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
             work: ti.template(), pair_count: ti.template(), virial: ti.template(), cell_of: ti.template(),
             cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
             spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
-            uniform: ti.template(), rounds: ti.template(), first_every: ti.template(), serial_from: ti.template()):
+            uniform: ti.template(), rounds: ti.template(), first_every: ti.template(), serial_from: ti.template(),
+            first_parts: ti.template()):
     """`rounds` rounds of pick and resolve, alternating between the two work lists (`rounds` is
     even, so every launch starts on list 0); a round after one that listed nothing has an
     empty list, so it costs two empty loops. With `first_every` the first round loops over
@@ -585,18 +667,24 @@ def _rounds(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_m
     parallel; the rounds from `serial_from` on (see `simulation.DISCRETE_PARALLEL_ROUNDS`) run
     on one thread, as one serial loop over the rounds, so their code is compiled once, not
     once per round (a step of a small scene is all serial: its kernel compiles in a fraction
-    of the time)."""
+    of the time). With `first_parts` (a CPU, the first round parallel) the first round runs in
+    parts (`_first_round_in_parts`)."""
     # The first round of a step loops over every circle: always a code of its own.
     unrolled = ti.static(max(min(serial_from, rounds), 1 if first_every else 0))
     for r in ti.static(range(unrolled)):
         every = ti.static(first_every and r == 0)
         serial = ti.static(r >= serial_from)
-        _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists, work,
-              cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level,
-              uniform, r % 2, marked, every, serial)
-        _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts, n_contacts,
-                 lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-                 periodic, two_level, uniform, r % 2, every, serial)
+        if ti.static(every and first_parts and not serial):
+            _first_round_in_parts(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked,
+                                  contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+                                  segs, box_w, box_h, spread, real, periodic, two_level, uniform)
+        else:
+            _pick(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts, lists,
+                  work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real, periodic,
+                  two_level, uniform, r % 2, marked, every, serial)
+            _resolve(pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                     n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                     spread, real, periodic, two_level, uniform, r % 2, every, serial)
     if ti.static(unrolled < rounds):
         ti.loop_config(serialize=True)
         for r in range(unrolled, rounds):
@@ -617,12 +705,12 @@ def _rounds_then_walls(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
                        spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
                        uniform: ti.template(), rounds: ti.template(), first_every: ti.template(),
-                       serial_from: ti.template()):
+                       serial_from: ti.template(), first_parts: ti.template()):
     """`rounds` rounds, then the wall reflections if they settled (the end of both launches);
     the walls' loop is serial when the last round's is (a few circles per thousand reach a wall)."""
     _rounds(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
             pair_count, virial, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
-            periodic, two_level, uniform, rounds, first_every, serial_from)
+            periodic, two_level, uniform, rounds, first_every, serial_from, first_parts)
     if ti.static(not periodic):
         _walls(pos, vel, radius, inv_mass, wall_count, wall_impulse, walled, work, box_w, box_h, real, uniform, True,
                serial_from < rounds)
@@ -636,12 +724,13 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
                segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
                real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(),
-               rounds: ti.template(), serial_from: ti.template()) -> ti.i32:
+               rounds: ti.template(), serial_from: ti.template(), first_parts: ti.template()) -> ti.i32:
     """Move, grid, the first `rounds` rounds of pair resolution and, when they settle, the walls,
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
     thousand circles). Returns the length of the next round's work list: not 0 when more
     rounds are needed (the walls wait for them). With `uniform`, every circle has the radius
-    and the mass of the first (`radius_of`)."""
+    and the mass of the first (`radius_of`); with `first_parts`, the first round runs in parts
+    (`_first_round_in_parts`)."""
     # serial_from = 0: the whole step on one thread (see backend.SERIAL_N).
     serial = ti.static(serial_from == 0)
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
@@ -652,7 +741,8 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                    serial)
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, True, serial_from)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, True, serial_from,
+                       first_parts)
     return work[LIST0]
 
 
@@ -667,7 +757,8 @@ def more_rounds(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nda
     """`rounds` more rounds, then the walls when they settle; returns as `begin_step`."""
     _rounds_then_walls(pos, vel, radius, inv_mass, ids, partner, picked, marked, contacts, n_contacts, lists, work,
                        pair_count, virial, wall_count, wall_impulse, walled, cell_of, cell_start, sorted_ids, ncx, ncy,
-                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, False, serial_from)
+                       rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform, rounds, False, serial_from,
+                       False)
     return work[LIST0]
 
 

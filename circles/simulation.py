@@ -69,6 +69,11 @@ DISCRETE_CONTACTS = 4
 #: circle's (`discrete.radius_of`), not each circle's: the same numbers, fewer loads. False:
 #: every scene reads them per circle (for tests that compare the two).
 DISCRETE_UNIFORM = True
+#: The discrete scheme's first round of a step on a CPU's threads: in one part of the circles
+#: per thread, each listing its marked circles before picking for them
+#: (`discrete._first_round_in_parts`). False: a loop over every circle, as on a GPU (for tests
+#: that compare the two).
+DISCRETE_FIRST_IN_PARTS = True
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
 #: Two-level grid in a walled box (the discrete scheme, and the event scheme's queue): circles
@@ -251,7 +256,7 @@ class Simulation:
         reductions.fill_i32(self._counters, 0)
         # Work counters of the discrete rounds; slot discrete.NLARGE counts the large circles of a
         # two-level grid (both schemes).
-        self._work = ti.ndarray(ti.i32, shape=5)
+        self._work = ti.ndarray(ti.i32, shape=discrete.PART_PICKS + max(count_parts(), 1))
         reductions.fill_i32(self._work, 0)
         self._record_cap = int(record_events)
         cap = max(1, self._record_cap)
@@ -763,7 +768,8 @@ class Simulation:
         parallel = self._parallel_rounds
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
                                    real, periodic, two, self._uniform,
-                                   DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS))
+                                   DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS),
+                                   DISCRETE_FIRST_IN_PARTS and count_parts() > 1)
         self.grid.complete = True
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.

@@ -300,3 +300,38 @@ def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatc
     unequal = circles_cpu.Simulation.from_arrays(pos, np.zeros((2, 2)), np.array([R, R]), mass=np.array([1.0, 3.0]),
                                                  box=BOX, scheme="discrete")
     assert not unequal._uniform
+
+
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypatch, boundary):
+    """On a CPU with several threads a step's first round runs in one part of the circles per
+    thread, each listing its marked circles before picking for them
+    (`discrete._first_round_in_parts`). It must give the same state bit for bit as the loop over
+    every circle that a GPU runs, on a dense, fast scene of mixed radii run with parallel loops
+    (backend.SERIAL_N at 0): isolated pairs, circles with several overlaps, contact lists that
+    overflow into cell searches, and walls."""
+    from circles import backend, grid, simulation
+    if grid.count_parts() < 2:
+        pytest.skip("one CPU thread (or a GPU): the first round has no parts")
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
+                              precision="f32", seed=5, dt=0.002, boundary=boundary)
+    runs = []
+    for parts in (True, False):
+        monkeypatch.setattr(simulation, "DISCRETE_FIRST_IN_PARTS", parts)
+        sim = circles_cpu.Simulation(scene)
+        assert sim._parallel_rounds > 0
+        crowded = 0
+        for _ in range(40):
+            sim.step(1)
+            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
+        runs.append((sim.state(), sim.stats(), crowded))
+    (a, st_a, crowded_a), (b, st_b, crowded_b) = runs
+    assert crowded_a == crowded_b > 0
+    assert st_a["pair_collisions"] == st_b["pair_collisions"] > 10000
+    for key in ("wall_collisions", "virial", "wall_impulse"):
+        assert st_a[key] == st_b[key]
+    if boundary == "walls":
+        assert st_a["wall_collisions"] > 500
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
