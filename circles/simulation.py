@@ -295,6 +295,8 @@ class Simulation:
             radii = self._radius.astype(self._np_real)
             inv_mass = (1.0 / self._mass).astype(self._np_real)
             self._uniform = DISCRETE_UNIFORM and bool(np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]))
+            # The first round of a step in one part per thread (`discrete._first_round_in_parts`).
+            self._first_parts = DISCRETE_FIRST_IN_PARTS and count_parts() > 1
 
     def _setup_parts(self):
         """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, with one
@@ -769,7 +771,7 @@ class Simulation:
         busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
                                    real, periodic, two, self._uniform,
                                    DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS),
-                                   DISCRETE_FIRST_IN_PARTS and count_parts() > 1)
+                                   self._first_parts)
         self.grid.complete = True
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.

@@ -72,6 +72,18 @@ def pairs(rng, m):
     return pos, vel, radius, tau
 
 
+def head_on(rng, pos, vel, radius, tau, k):
+    """The first k pairs made a hair apart (1e-7 to 1e-2 of their contact distance) and heading
+    nearly straight at each other, their clocks equal: their time of impact is close to
+    c / (2 q), the cull's bound. In place."""
+    gap = pos[1:2 * k:2] - pos[0:2 * k:2]
+    unit = gap / np.linalg.norm(gap, axis=1, keepdims=True)
+    s = radius[0:2 * k:2] + radius[1:2 * k:2]
+    pos[1:2 * k:2] = pos[0:2 * k:2] + unit * (s * (1.0 + 10.0 ** rng.uniform(-7, -2, size=k)))[:, None]
+    vel[1:2 * k:2] = vel[0:2 * k:2] - unit * rng.uniform(0.5, 1.5, size=(k, 1)) + rng.normal(0, 1e-3, size=(k, 2))
+    tau[1:2 * k:2] = tau[0:2 * k:2]
+
+
 def expected(pos, vel, radius, tau, m):
     """The reference's time for each pair, from the later of the two clocks; math.inf for never,
     and a flag for the cases whose outcome round-off could tip (disc within 1e-9 of b^2 + |a c|)."""
@@ -136,15 +148,10 @@ def test_cull_keeps_every_time_up_to_the_horizon(circles_cpu, real):
     m = 20000
     rng = np.random.default_rng(7)
     pos, vel, radius, tau = pairs(rng, m)
-    # Half the pairs a hair apart and heading nearly straight at each other: their time of
-    # impact is close to c / (2 q), the cull's bound, so its margins are what keeps them.
+    # Half the pairs a hair apart and heading nearly straight at each other: the cull's
+    # margins are what keeps them.
     k = m // 2
-    gap = pos[1:2 * k:2] - pos[0:2 * k:2]
-    unit = gap / np.linalg.norm(gap, axis=1, keepdims=True)
-    s = radius[0:2 * k:2] + radius[1:2 * k:2]
-    pos[1:2 * k:2] = pos[0:2 * k:2] + unit * (s * (1.0 + 10.0 ** rng.uniform(-7, -2, size=k)))[:, None]
-    vel[1:2 * k:2] = vel[0:2 * k:2] - unit * rng.uniform(0.5, 1.5, size=(k, 1)) + rng.normal(0, 1e-3, size=(k, 2))
-    tau[1:2 * k:2] = tau[0:2 * k:2]
+    head_on(rng, pos, vel, radius, tau, k)
     free = run_times(real, pos, vel, radius, tau, np.full(m, 1e30))
     t0 = np.maximum(tau[0::2], tau[1::2]).astype(np_real)
     hits = free < 1e29
@@ -182,12 +189,7 @@ def test_pair_time_is_the_same_from_either_circle(circles_cpu, real):
     m = 20000
     rng = np.random.default_rng(11)
     pos, vel, radius, tau = pairs(rng, m)
-    k = m // 4
-    gap = pos[1:2 * k:2] - pos[0:2 * k:2]
-    unit = gap / np.linalg.norm(gap, axis=1, keepdims=True)
-    s = radius[0:2 * k:2] + radius[1:2 * k:2]
-    pos[1:2 * k:2] = pos[0:2 * k:2] + unit * (s * (1.0 + 10.0 ** rng.uniform(-7, -2, size=k)))[:, None]
-    vel[1:2 * k:2] = vel[0:2 * k:2] - unit * rng.uniform(0.5, 1.5, size=(k, 1))
+    head_on(rng, pos, vel, radius, tau, m // 4)
     horizon = np.where(rng.random(m) < 0.5, 1e30, rng.uniform(0.0, 3.0, size=m))
     arrays = device_arrays(real, pos, vel, radius, tau, horizon)
     out = ti.ndarray(real, shape=(3, m))
