@@ -1,7 +1,7 @@
 """Side-by-side speed of this tree's engine against an earlier commit, in one run.
 
     python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
-                           [--arch cpu|gpu] [--steps K] [--scene bench|spread]
+                           [--arch cpu|gpu] [--steps K] [--scene bench|spread] [--interleave]
 
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
@@ -12,10 +12,18 @@ rounds, this tree first in odd ones), so that the load of a shared machine falls
 Reported: median circle-steps/s of each engine with [min, max] over all its timed steps, the
 ratio of the medians, and the pair collisions and energy change of each (the same scene and
 the same physics must give the same counts: a speed-up that changes them is not one).
+
+With `--interleave`, each round is one process that holds both engines (the base's package
+imported as `circles_base`) and steps them in turn, one step each, the first of each pair
+alternating: the machine's load, which on a shared machine changes by tens of percent within
+minutes, then falls on both within a fraction of a second. The ratio column is then the median
+over the pairs of steps of base step time / this step time, with the quartiles, and the speeds
+are the medians of each engine's steps.
 """
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -50,6 +58,40 @@ print(json.dumps({"times": times.tolist(), "pairs": int(pairs), "energy_change":
 """
 
 
+#: Both engines in one process, stepped in turn (`--interleave`).
+PAIRED = """
+import json, sys, time
+import taichi as ti
+n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+sys.path.insert(0, sys.argv[4])
+sys.path.insert(0, sys.argv[7])
+import circles, circles_base
+from kernel_profile import bench_scene
+circles.init(arch=sys.argv[5])
+circles_base.backend._state.update(initialized=True, arch=circles.backend.current_arch())  # one runtime for both
+sims = {}
+for name, pkg in (("base", circles_base), ("this", circles)):
+    scene = bench_scene(n, scheme, seed=1)
+    sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__}))
+    sims[name].step(16)  # compiles every kernel of a step, the reorder of every 16th step included
+start = {k: s.stats() for k, s in sims.items()}
+times = {"base": [], "this": []}
+for k in range(steps):
+    for name in (("base", "this") if k % 2 == 0 else ("this", "base")):
+        ti.sync()
+        t0 = time.perf_counter()
+        sims[name].step(1)
+        ti.sync()
+        times[name].append(time.perf_counter() - t0)
+out = {}
+for name, sim in sims.items():
+    end = sim.stats()
+    out[name] = {"times": times[name], "pairs": end["pair_collisions"] - start[name]["pair_collisions"],
+                 "energy_change": end["kinetic_energy"] / start[name]["kinetic_energy"] - 1}
+print(json.dumps(out))
+"""
+
+
 def export(ref, into):
     """The tree of commit `ref` written into the folder `into`."""
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
@@ -68,6 +110,17 @@ def run(tree, n, scheme, steps, arch, scene):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def run_paired(base_tree, n, scheme, steps, arch):
+    """Both engines in one process (`PAIRED`): the base tree's package copied as `circles_base`."""
+    pkg_dir = Path(base_tree) / "paired"
+    if not (pkg_dir / "circles_base").is_dir():
+        shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, "",
+                          str(pkg_dir)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", required=True,
@@ -80,11 +133,17 @@ def main():
                         help="timed steps per process (default: 2e7 / N discrete, 2e6 / N event, 3 to 20)")
     parser.add_argument("--scene", choices=("bench", "spread"), default="bench",
                         help="spread: bench.py's radius-spread mixture (1%% of the circles 50 times larger)")
+    parser.add_argument("--interleave", action="store_true",
+                        help="both engines in one process, stepped in turn (see above); the bench scene only")
     args = parser.parse_args()
+    if args.interleave and args.scene != "bench":
+        parser.error(f"--interleave runs the bench scene only, not --scene {args.scene}: leave out one of the two")
     what = "radius-spread mixture, " if args.scene == "spread" else ""
-    print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}; {what}area fraction 0.3, "
-          "walls, f32, default dt\n")
-    print("| N | scheme | base circle-steps/s | this circle-steps/s | ratio | base pairs, energy change "
+    how = ", stepped in turn in one process" if args.interleave else ""
+    print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}{how}; {what}area fraction "
+          "0.3, walls, f32, default dt\n")
+    ratio = "ratio, paired steps [q25, q75]" if args.interleave else "ratio"
+    print(f"| N | scheme | base circle-steps/s | this circle-steps/s | {ratio} | base pairs, energy change "
           "| this pairs, energy change |")
     print("|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
@@ -97,6 +156,22 @@ def main():
                 steps = args.steps or max(3, min(20, int(2e6 // n) if scheme == "event" else int(2e7 // n)))
                 speeds = {"base": [], "this": []}
                 last = {}
+                if args.interleave:
+                    pair_ratios = []
+                    for r in range(args.rounds):
+                        result = run_paired(tmp, n, scheme, steps, args.arch)
+                        for name in speeds:
+                            speeds[name] += [n / t for t in result[name]["times"]]
+                            last[name] = result[name]
+                        pair_ratios += [b / t for b, t in zip(result["base"]["times"], result["this"]["times"])]
+                    med = {k: float(np.median(v)) for k, v in speeds.items()}
+                    q25, q50, q75 = np.percentile(pair_ratios, [25, 50, 75])
+                    cells = [f"{med[k] / 1e6:.3g} M [{min(speeds[k]) / 1e6:.3g}, {max(speeds[k]) / 1e6:.3g}]"
+                             for k in ("base", "this")]
+                    facts = [f"{last[k]['pairs']}, {last[k]['energy_change']:.2g}" for k in ("base", "this")]
+                    print(f"| {n} | {scheme} | {cells[0]} | {cells[1]} | {q50:.3f} [{q25:.3f}, {q75:.3f}] | "
+                          f"{facts[0]} | {facts[1]} |", flush=True)
+                    continue
                 for r in range(args.rounds):
                     # Which tree runs first alternates too: on a loaded machine the first of two
                     # back-to-back processes measured 10 to 20% faster, whichever tree it ran.
