@@ -945,9 +945,9 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
     wall_impulse); grid: (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids); log:
     (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`.
     Events after `until` (at most the horizon) are left in the queue. `window`: () or, for a
-    window of a step split into parts (`queue_parts`), (saved,): each changed circle's state is
-    copied to its record in `saved` before its first change in the window, the record marked
-    with `mark`, the window's number (`_save_first`)."""
+    window of a step split into parts (`queue_parts`), (saved, backup): each changed circle's
+    state is copied to `backup` before its first change in the window (saved[i] = mark, the
+    window's number)."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
@@ -975,9 +975,9 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
         p = ev_p[c]
         changed = 1
         if ti.static(len(window) > 0):
-            _save_first(c, window, mark, state, sums, real)
+            _save_first(c, window, mark, state, sums)
             if p >= 0:
-                _save_first(p, window, mark, state, sums, real)
+                _save_first(p, window, mark, state, sums)
         if p >= 0:
             if ev_p[p] != c or ev_t[p] != e:
                 reached = -1.0
@@ -1037,70 +1037,17 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
     return reached, horizon
 
 
-def saved_words(real) -> int:
-    """32-bit words of a circle's record in `_save_first`'s backup: the window's mark, the two
-    counts, the two float64 sums, and the position, velocity and clock in the working precision
-    (`real`): 12 in float32 (48 bytes), 17 in float64."""
-    return 7 + 5 * (2 if real == ti.f64 else 1)
-
-
 @ti.func
-def _put_f64(rec: ti.template(), x, w: ti.template(), v):
-    """Float64 v into words w and w + 1 of circle x's record, bit for bit."""
-    bits = ti.bit_cast(ti.cast(v, ti.f64), ti.i64)
-    rec[x][w] = ti.cast(bits, ti.i32)  # the low half
-    rec[x][w + 1] = ti.cast(bits >> 32, ti.i32)
-
-
-@ti.func
-def _get_f64(rec: ti.template(), x, w: ti.template()):
-    """The float64 in words w and w + 1 of circle x's record (`_put_f64`)."""
-    low = ti.cast(ti.cast(rec[x][w], ti.u32), ti.i64)
-    return ti.bit_cast((ti.cast(rec[x][w + 1], ti.i64) << 32) | low, ti.f64)
-
-
-@ti.func
-def _put_real(rec: ti.template(), x, w: ti.template(), v, real: ti.template()):
-    """v, of the working precision, into its words from w of circle x's record, bit for bit."""
-    if ti.static(real == ti.f64):
-        _put_f64(rec, x, w, v)
-    else:
-        rec[x][w] = ti.bit_cast(v, ti.i32)
-
-
-@ti.func
-def _get_real(rec: ti.template(), x, w: ti.template(), real: ti.template()):
-    """The working-precision number in words from w of circle x's record (`_put_real`)."""
-    v = ti.cast(0.0, real)
-    if ti.static(real == ti.f64):
-        v = _get_f64(rec, x, w)
-    else:
-        v = ti.bit_cast(rec[x][w], ti.f32)
-    return v
-
-
-@ti.func
-def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.template(), real: ti.template()):
-    """Circle x's state into the backup, unless it is there already this window (see `_drain`).
-
-    One record of `saved_words` words per circle, its first word the window's mark: a save
-    reads and writes one or two cache lines, not one for each of seven arrays (the events of
-    a window come in time order, at random places in the part, so each of those lines is a
-    miss)."""
-    rec = ti.static(window[0])
-    if rec[x][0] != mark:
-        rec[x][0] = mark
-        rec[x][1] = sums[0][x]
-        rec[x][2] = sums[2][x]
-        _put_f64(rec, x, 3, sums[1][x])
-        _put_f64(rec, x, 5, sums[3][x])
-        step = ti.static(2 if real == ti.f64 else 1)
-        p = state[0][x]
-        v = state[1][x]
-        for a in ti.static(range(2)):
-            _put_real(rec, x, 7 + a * step, p[a], real)
-            _put_real(rec, x, 7 + (2 + a) * step, v[a], real)
-        _put_real(rec, x, 7 + 4 * step, state[4][x], real)
+def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.template()):
+    """Circle x's state into the backup, unless it is there already this window (see `_drain`)."""
+    if window[0][x] != mark:
+        window[0][x] = mark
+        b = ti.static(window[1])
+        b[0][x] = state[0][x]
+        b[1][x] = state[1][x]
+        b[2][x] = state[4][x]
+        for k in ti.static(range(4)):
+            b[3 + k][x] = sums[k][x]
 
 
 @launch.kernel
@@ -1412,19 +1359,18 @@ def _pair_in_part(i, j, a: ti.template()):
 
 @launch.kernel
 def restore_saved(saved: ndarr, mark: ti.i32, pos: ndarr, vel: ndarr, tau: ndarr, pair_count: ndarr, virial: ndarr,
-                  wall_count: ndarr, wall_impulse: ndarr, real: ti.template()):
-    """Every circle whose state the window saved (its record marked `mark`, see `_save_first`)
-    put back."""
+                  wall_count: ndarr, wall_impulse: ndarr, b_pos: ndarr, b_vel: ndarr, b_tau: ndarr,
+                  b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr):
+    """Every circle whose state the step saved (saved[i] == mark, see `_drain`) put back."""
     for i in range(pos.shape[0]):
-        if saved[i][0] == mark:
-            step = ti.static(2 if real == ti.f64 else 1)
-            pair_count[i] = saved[i][1]
-            wall_count[i] = saved[i][2]
-            virial[i] = _get_f64(saved, i, 3)
-            wall_impulse[i] = _get_f64(saved, i, 5)
-            pos[i] = ti.Vector([_get_real(saved, i, 7, real), _get_real(saved, i, 7 + step, real)])
-            vel[i] = ti.Vector([_get_real(saved, i, 7 + 2 * step, real), _get_real(saved, i, 7 + 3 * step, real)])
-            tau[i] = _get_real(saved, i, 7 + 4 * step, real)
+        if saved[i] == mark:
+            pos[i] = b_pos[i]
+            vel[i] = b_vel[i]
+            tau[i] = b_tau[i]
+            pair_count[i] = b_pair_count[i]
+            virial[i] = b_virial[i]
+            wall_count[i] = b_wall_count[i]
+            wall_impulse[i] = b_wall_impulse[i]
 
 
 @launch.kernel
@@ -1445,7 +1391,9 @@ def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_
 def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
                 ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
                 prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
-                wall_impulse: ndarr, touched: ndarr, dirty: ndarr, saved: ndarr, label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
+                wall_impulse: ndarr, touched: ndarr, dirty: ndarr, saved: ndarr, b_pos: ndarr, b_vel: ndarr,
+                b_tau: ndarr, b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
+                label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
                 parts: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, mark: ti.i32,
@@ -1512,7 +1460,9 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
-                                         (label, touched, dirty), (saved,), mark)
+                                         (label, touched, dirty),
+                                         (saved, (b_pos, b_vel, b_tau, b_pair_count, b_virial, b_wall_count,
+                                                  b_wall_impulse)), mark)
                 result[k] = reached
 
 @launch.kernel

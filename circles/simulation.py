@@ -49,8 +49,8 @@ EVENT_QUEUE_ON_CPU = True
 SPLIT_RETRY_STEPS = 16
 #: A split into parts claims at most n / PART_CLAIMS circles with their clusters across borders.
 PART_CLAIMS = 4
-#: The arrays of a circle's state that an event step changes, in the order event.restore_saved
-#: takes them.
+#: The arrays of a circle's state that an event step changes, in the order event.queue_parts
+#: takes their backups.
 BACKUP_ORDER = ("pos", "vel", "tau", "pair_count", "virial", "wall_count", "wall_impulse")
 #: Windows of a step split into parts at most (`Simulation._queue_parts_step`), and the steps
 #: after which a step tries half as many.
@@ -313,11 +313,11 @@ class Simulation:
         self._part_result = ti.ndarray(ti.f64, shape=event.MOST_PARTS)
         # Each part's calendar takes one bucket more than its share (see event.queue_parts).
         self._head = ti.ndarray(ti.i32, shape=n // event.QUEUE_BUCKET_CIRCLES + event.MOST_PARTS + 1)
-        # What a window's events changed, put back when a collision would outrun the grid
-        # (`_queue_parts_step`): a record per circle (`event._save_first`); and the flags of
-        # its windows.
-        self._saved = ti.Vector.ndarray(event.saved_words(self._real), ti.i32, shape=n)
-        self._saved.fill(0)
+        # What a step's events changed, put back when a collision would outrun the grid
+        # (`_queue_parts_step`), and the flags of its windows.
+        self._backup = {name: self._like(getattr(self, name)) for name in BACKUP_ORDER}
+        self._saved = ti.ndarray(ti.i32, shape=n)
+        reductions.fill_i32(self._saved, 0)
         self._mark = 0
         self._touched = ti.ndarray(ti.i32, shape=n)
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
@@ -649,11 +649,12 @@ class Simulation:
         the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as many
         are tried. A collision that would outrun the grid ends the step at its time for
         every circle, but the other parts may have gone past it: the circles the window changed
-        are put back (`_saved`, taken at each circle's first change in the window) and the
+        are put back (`_backup`, taken at each circle's first change in the window) and the
         window runs again up to that time."""
         w, hgt = self.box
         record = self._record_cap > 0
         g = self.grid
+        b = self._backup
         parts, rows_per = self._part_shape()
         if parts < 2:
             return self._queue_step_whole(h, vlim)
@@ -689,8 +690,8 @@ class Simulation:
                 event.queue_parts(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
                                   self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
-                                  self.wall_impulse, self._touched, self._dirty_w, self._saved, self._label,
-                                  self._claimed, self._part_info,
+                                  self.wall_impulse, self._touched, self._dirty_w, self._saved,
+                                  *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
                                   self._part_result, *cell_args, rows_per, parts, w, hgt, end, min(t1, end), vlim,
                                   self.time, self._mark, first, self._counters, self._log_t, self._log_i,
                                   self._log_j, self._real, record, periodic)
@@ -708,7 +709,7 @@ class Simulation:
                 # again from its start up to it, with every circle's events predicted anew (the
                 # window's parts still hold: a shorter window links fewer circles).
                 event.restore_saved(self._saved, self._mark, *(getattr(self, name) for name in BACKUP_ORDER),
-                                    self._real)
+                                    *(b[name] for name in BACKUP_ORDER))
                 if record:
                     self._set_counter(1, log_count)
                 reductions.fill_i32(self._touched, 1)

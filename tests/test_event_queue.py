@@ -26,8 +26,8 @@ SCENES = {
                              precision="f64", mass="area"),
 }
 
-#: The parts' test also takes the steps cut short in float32 (a circle's saved record holds its
-#: numbers in the working precision, `event._save_first`).
+#: The parts' test also takes the steps cut short in float32 (the window's saved states, put back
+#: at a cut, are in the working precision: `event._save_first`, `event.restore_saved`).
 PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32")})
 
 
@@ -95,8 +95,8 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     the state and the event log must equal the rounds' bit for bit. In the equal-mass scene
     the clusters of linked circles grow past what a split may claim (a quarter of the
     circles), so the steps run in windows; the radius-mass scene has steps cut short by a
-    collision that would outrun the grid (the window runs again up to it, its circles' records
-    put back), in either precision; in the periodic box
+    collision that would outrun the grid (the window runs again up to it, the circles it
+    changed put back), in either precision; in the periodic box
     the strips' borders wrap around (the last strip's is with the first). With room for no
     claims at all every split fails, and the steps fall back to one queue for all circles."""
     from circles import backend, event, simulation
