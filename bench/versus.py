@@ -1,14 +1,15 @@
 """Side-by-side speed of this tree's engine against an earlier commit, in one run.
 
     python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
-                           [--arch cpu|gpu] [--steps K] [--scene bench|spread] [--interleave]
+                           [--arch cpu|gpu] [--steps K] [--warm W] [--scene bench|spread] [--interleave]
 
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
 in (0.5, 1.0), default dt; seed 1; or with `--scene spread` the radius-spread mixture of
 bench.py's spread rows) in fresh processes, alternating base and this tree `--rounds` times (base first in even
-rounds, this tree first in odd ones), so that the load of a shared machine falls on both alike; each process times single steps after 16 warm-up steps
-(which compile every kernel, the periodic reorder's included).
+rounds, this tree first in odd ones), so that the load of a shared machine falls on both alike; each process times single steps after `--warm` warm-up steps
+(16 by default, which compile every kernel, the periodic reorder's included; more to time a
+relaxed scene, whose speeds have spread out).
 Reported: median circle-steps/s of each engine with [min, max] over all its timed steps, the
 ratio of the medians, and the pair collisions and energy change of each (the same scene and
 the same physics must give the same counts: a speed-up that changes them is not one).
@@ -52,7 +53,7 @@ if sys.argv[6] == "spread":
     sim = circles.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme=scheme, precision="f32")
 else:
     sim = circles.Simulation(bench_scene(n, scheme, seed=1))
-sim.step(16)  # compiles every kernel of a step, the reorder of every 16th step included
+sim.step(int(sys.argv[7]))  # compiles every kernel of a step, the reorder of every 16th step included
 times, pairs, energy_change, _ = time_steps(sim, steps)
 print(json.dumps({"times": times.tolist(), "pairs": int(pairs), "energy_change": energy_change}))
 """
@@ -73,7 +74,7 @@ sims = {}
 for name, pkg in (("base", circles_base), ("this", circles)):
     scene = bench_scene(n, scheme, seed=1)
     sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__}))
-    sims[name].step(16)  # compiles every kernel of a step, the reorder of every 16th step included
+    sims[name].step(int(sys.argv[8]))  # compiles every kernel of a step, the reorder of every 16th step included
 start = {k: s.stats() for k, s in sims.items()}
 times = {"base": [], "this": []}
 for k in range(steps):
@@ -103,21 +104,22 @@ def export(ref, into):
     tar_path.unlink()
 
 
-def run(tree, n, scheme, steps, arch, scene):
+def run(tree, n, scheme, steps, arch, scene, warm):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench"), arch, scene],
+    out = subprocess.run([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench"), arch, scene,
+                          str(warm)],
                          capture_output=True, text=True, env=env, cwd=str(tree), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run_paired(base_tree, n, scheme, steps, arch):
+def run_paired(base_tree, n, scheme, steps, arch, warm):
     """Both engines in one process (`PAIRED`): the base tree's package copied as `circles_base`."""
     pkg_dir = Path(base_tree) / "paired"
     if not (pkg_dir / "circles_base").is_dir():
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, "",
-                          str(pkg_dir)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
+                          str(pkg_dir), str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -131,15 +133,19 @@ def main():
     parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
     parser.add_argument("--steps", type=int, default=0,
                         help="timed steps per process (default: 2e7 / N discrete, 2e6 / N event, 3 to 20)")
+    parser.add_argument("--warm", type=int, default=16, help="warm-up steps before the timed ones (at least 16)")
     parser.add_argument("--scene", choices=("bench", "spread"), default="bench",
                         help="spread: bench.py's radius-spread mixture (1%% of the circles 50 times larger)")
     parser.add_argument("--interleave", action="store_true",
                         help="both engines in one process, stepped in turn (see above); the bench scene only")
     args = parser.parse_args()
+    if args.warm < 16:
+        parser.error(f"--warm {args.warm} is below 16: the timed steps would include the first reorder's "
+                     "compilation; give 16 or more")
     if args.interleave and args.scene != "bench":
         parser.error(f"--interleave runs the bench scene only, not --scene {args.scene}: leave out one of the two")
     what = "radius-spread mixture, " if args.scene == "spread" else ""
-    how = ", stepped in turn in one process" if args.interleave else ""
+    how = (", stepped in turn in one process" if args.interleave else "") + f", {args.warm} warm-up steps"
     print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}{how}; {what}area fraction "
           "0.3, walls, f32, default dt\n")
     ratio = "ratio, paired steps [q25, q75]" if args.interleave else "ratio"
@@ -159,7 +165,7 @@ def main():
                 if args.interleave:
                     pair_ratios = []
                     for r in range(args.rounds):
-                        result = run_paired(tmp, n, scheme, steps, args.arch)
+                        result = run_paired(tmp, n, scheme, steps, args.arch, args.warm)
                         for name in speeds:
                             speeds[name] += [n / t for t in result[name]["times"]]
                             last[name] = result[name]
@@ -177,7 +183,7 @@ def main():
                     # back-to-back processes measured 10 to 20% faster, whichever tree it ran.
                     pair = (("base", tmp), ("this", ROOT))
                     for name, tree in (pair if r % 2 == 0 else pair[::-1]):
-                        result = run(tree, n, scheme, steps, args.arch, args.scene)
+                        result = run(tree, n, scheme, steps, args.arch, args.scene, args.warm)
                         speeds[name] += [n / t for t in result["times"]]
                         last[name] = result
                 med = {k: float(np.median(v)) for k, v in speeds.items()}
