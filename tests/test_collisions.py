@@ -267,6 +267,39 @@ def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):
     np.testing.assert_array_equal(a.vel, b.vel)
 
 
+def run_with_flag(circles, monkeypatch, scene, flag, steps, check):
+    """The discrete `scene` run `steps` single steps with `simulation.<flag>` True, then False:
+    a (state, stats, crowded) for each, crowded summing over the steps the circles whose contact
+    list overflowed (they search their cells). `check(sim, value)` looks at each new Simulation."""
+    from circles import simulation
+    runs = []
+    for value in (True, False):
+        monkeypatch.setattr(simulation, flag, value)
+        sim = circles.Simulation(scene)
+        check(sim, value)
+        crowded = 0
+        for _ in range(steps):
+            sim.step(1)
+            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
+        runs.append((sim.state(), sim.stats(), crowded))
+    return runs
+
+
+def assert_runs_equal(runs, boundary, pairs, walls):
+    """The two runs of `run_with_flag` the same bit for bit: positions, velocities, counts and
+    sums; both had contact lists overflow, more than `pairs` pair collisions and, in a walled
+    box, more than `walls` wall hits."""
+    (a, st_a, crowded_a), (b, st_b, crowded_b) = runs
+    assert crowded_a == crowded_b > 0
+    assert st_a["pair_collisions"] == st_b["pair_collisions"] > pairs
+    for key in ("wall_collisions", "virial", "wall_impulse"):
+        assert st_a[key] == st_b[key]
+    if boundary == "walls":
+        assert st_a["wall_collisions"] > walls
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
+
+
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatch, boundary):
     """A discrete scene whose circles share one radius and one mass reads the first circle's
@@ -274,28 +307,14 @@ def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatc
     circle's, on a dense, fast scene whose circles overlap several others at once (contact
     lists that overflow into cell searches) and hit the walls. Equal radii with unequal
     masses read per circle (test_unequal_masses_follow_1d_formula checks their outcome)."""
-    from circles import simulation
     scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=0.007, speed=(2.0, 6.0), scheme="discrete",
                               precision="f32", seed=5, dt=0.002, boundary=boundary)
-    runs = []
-    for uniform in (True, False):
-        monkeypatch.setattr(simulation, "DISCRETE_UNIFORM", uniform)
-        sim = circles_cpu.Simulation(scene)
+
+    def check(sim, uniform):
         assert sim._uniform == uniform
-        crowded = 0
-        for _ in range(12):
-            sim.step(1)
-            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
-        runs.append((sim.state(), sim.stats(), crowded))
-    (a, st_a, crowded_a), (b, st_b, crowded_b) = runs
-    assert crowded_a == crowded_b > 0
-    assert st_a["pair_collisions"] == st_b["pair_collisions"] > 1000
-    for key in ("wall_collisions", "virial", "wall_impulse"):
-        assert st_a[key] == st_b[key]
-    if boundary == "walls":
-        assert st_a["wall_collisions"] > 50
-    np.testing.assert_array_equal(a.pos, b.pos)
-    np.testing.assert_array_equal(a.vel, b.vel)
+
+    runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_UNIFORM", 12, check)
+    assert_runs_equal(runs, boundary, pairs=1000, walls=50)
     pos = np.array([[0.3, 0.5], [0.7, 0.5]])
     unequal = circles_cpu.Simulation.from_arrays(pos, np.zeros((2, 2)), np.array([R, R]), mass=np.array([1.0, 3.0]),
                                                  box=BOX, scheme="discrete")
@@ -310,28 +329,15 @@ def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypa
     every circle that a GPU runs, on a dense, fast scene of mixed radii run with parallel loops
     (backend.SERIAL_N at 0): isolated pairs, circles with several overlaps, contact lists that
     overflow into cell searches, and walls."""
-    from circles import backend, grid, simulation
+    from circles import backend, grid
     if grid.count_parts() < 2:
         pytest.skip("one CPU thread (or a GPU): the first round has no parts")
     monkeypatch.setattr(backend, "SERIAL_N", 0)
     scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
                               precision="f32", seed=5, dt=0.002, boundary=boundary)
-    runs = []
-    for parts in (True, False):
-        monkeypatch.setattr(simulation, "DISCRETE_FIRST_IN_PARTS", parts)
-        sim = circles_cpu.Simulation(scene)
+
+    def check(sim, parts):
         assert sim._parallel_rounds > 0
-        crowded = 0
-        for _ in range(40):
-            sim.step(1)
-            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
-        runs.append((sim.state(), sim.stats(), crowded))
-    (a, st_a, crowded_a), (b, st_b, crowded_b) = runs
-    assert crowded_a == crowded_b > 0
-    assert st_a["pair_collisions"] == st_b["pair_collisions"] > 10000
-    for key in ("wall_collisions", "virial", "wall_impulse"):
-        assert st_a[key] == st_b[key]
-    if boundary == "walls":
-        assert st_a["wall_collisions"] > 500
-    np.testing.assert_array_equal(a.pos, b.pos)
-    np.testing.assert_array_equal(a.vel, b.vel)
+
+    runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_FIRST_IN_PARTS", 40, check)
+    assert_runs_equal(runs, boundary, pairs=10000, walls=500)
