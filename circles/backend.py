@@ -57,8 +57,28 @@ def current_arch() -> str | None:
 #: 1.6 times the circle-steps/s of two threads at 1e3, 1.0 to 1.5 times at 1e4, even at 3e4,
 #: 0.65 to 0.85 times at 1e5).
 SERIAL_N = 20_000
+#: The event scheme's limit, as circles times the CPU's threads: up to it, a step runs on one
+#: thread from one queue (`event.queue_step`, each pair's first time computed once) rather
+#: than in parts on every thread (`event.queue_parts`). The parts pay for their split, their
+#: windows and a dozen launches a step, a few milliseconds. On this project's 2-core machine
+#: (`bench/versus.py --interleave`, the bench scene after 40 steps, the same pairs and energy)
+#: one queue ran 1.91, 1.57 and 1.36 times as fast as the parts at 3e4, 5e4 and 1e5 circles,
+#: 1.02 at 1.5e5 and 0.83 at 2e5 and 3e5. More threads share that fixed cost among more
+#: parts, hence the product. With one thread there are no parts: always one queue.
+EVENT_SERIAL_WORK = 200_000
 
 
-def serial_loops(n: int) -> bool:
-    """Whether the per-step loops over n circles run on one thread (see `SERIAL_N`)."""
-    return current_arch() == "cpu" and n <= SERIAL_N
+def cpu_threads() -> int:
+    """The threads of Taichi's CPU pool (`cpu_max_num_threads`)."""
+    return max(int(ti.lang.impl.current_cfg().cpu_max_num_threads), 1)
+
+
+def serial_loops(n: int, scheme: str = "discrete") -> bool:
+    """Whether the per-step loops over n circles of `scheme` run on one thread (see `SERIAL_N`
+    and `EVENT_SERIAL_WORK`)."""
+    if current_arch() != "cpu":
+        return False
+    if scheme == "event":
+        threads = cpu_threads()
+        return n <= SERIAL_N or threads < 2 or n * threads <= EVENT_SERIAL_WORK
+    return n <= SERIAL_N

@@ -249,8 +249,8 @@ class Simulation:
         self.wall_count = ti.ndarray(ti.i32, shape=n)
         self.virial = ti.ndarray(ti.f64, shape=n)
         self.wall_impulse = ti.ndarray(ti.f64, shape=n)
-        # Small scenes on a CPU: every per-step loop on one thread (backend.SERIAL_N).
-        self._serial = serial_loops(n)
+        # Small scenes on a CPU: every per-step loop on one thread (backend.serial_loops).
+        self._serial = serial_loops(n, scheme)
         self.grid = Grid(n, self.box, self.periodic, serial=self._serial)
         self._upload(np.asarray(pos, dtype=np.float64), np.asarray(vel, dtype=np.float64), np.zeros(n, np.int32),
                      np.zeros(n, np.int32), np.zeros(n), np.zeros(n))

@@ -31,6 +31,29 @@ SCENES = {
 PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32")})
 
 
+def on_threads(monkeypatch):
+    """Event scenes of any size run their loops on the CPU's threads, as a large scene's do
+    (`backend.serial_loops` with its limits at 0)."""
+    from circles import backend
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    monkeypatch.setattr(backend, "EVENT_SERIAL_WORK", 0)
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the limits are a CPU's")
+@pytest.mark.parametrize("threads", [1, 2, 8])
+def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypatch, threads):
+    """The event scheme runs on one thread (one queue, `event.queue_step`) up to
+    EVENT_SERIAL_WORK circles times the threads, and always with one thread (no parts); the
+    discrete scheme up to SERIAL_N circles, whatever the threads."""
+    from circles import backend
+    monkeypatch.setattr(backend, "cpu_threads", lambda: threads)
+    limit = backend.EVENT_SERIAL_WORK // threads
+    for n in (1, backend.SERIAL_N, limit, limit + 1, 10**7):
+        assert backend.serial_loops(n, "discrete") == (n <= backend.SERIAL_N), n
+        expected = n <= backend.SERIAL_N or threads == 1 or n <= limit
+        assert backend.serial_loops(n, "event") == expected, (n, threads)
+
+
 def run(circles, monkeypatch, scene, queue, steps=25):
     from circles import simulation
     monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
@@ -70,13 +93,12 @@ def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
 def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
     """Scenes this small run the queue's first predictions on one thread, each pair's time
     offered to both circles (event._first_events_once), and the grid build and the finish
-    serially too (backend.SERIAL_N); with that limit at 0 they run as a large scene's
+    serially too (backend.serial_loops); with its limits at 0 they run as a large scene's
     do, on several threads, each circle searching all its cells. The state must equal the
     rounds' bit for bit."""
-    from circles import backend
 
     rounds = run(circles_cpu, monkeypatch, SCENES[name], False)
-    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    on_threads(monkeypatch)
     sim = run(circles_cpu, monkeypatch, SCENES[name], True)
     assert not sim._serial and sim._event_queue
     a, b = rounds.state(), sim.state()
@@ -99,10 +121,10 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     changed put back), in either precision; in the periodic box
     the strips' borders wrap around (the last strip's is with the first). With room for no
     claims at all every split fails, and the steps fall back to one queue for all circles."""
-    from circles import backend, event, simulation
+    from circles import event, simulation
 
     rounds = run(circles_cpu, monkeypatch, PARTS_SCENES[name], False)
-    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    on_threads(monkeypatch)
     monkeypatch.setattr(event, "PART_CIRCLES", 200)
     monkeypatch.setattr(simulation, "PART_CLAIMS", claims)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
@@ -133,11 +155,11 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     pairs) lies in one part, the clusters claimed across borders among them; and the parts'
     lists (a strip's circles labelled with it, then the circles claimed for it, labelled
     -1 - k) hold every circle once, in parts of the sizes the split reports."""
-    from circles import backend, event
+    from circles import event
     from circles.geometry import spans
     from circles.simulation import SPEED_MARGIN
 
-    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    on_threads(monkeypatch)
     monkeypatch.setattr(event, "PART_CIRCLES", 300)
     n, box = 4000, np.array([1.0, 1.0])
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=tuple(box), radius=0.005, speed=(0.5, 1.0),
