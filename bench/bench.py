@@ -14,8 +14,11 @@ What is measured, all in one run and one process:
 1. Throughput. Circles of one radius R at area fraction 0.3 in a 16:9 walled box, speeds
    uniform in SPEED, default dt of each scheme; N from 1e3 up, both schemes, f32 and f64.
    Each configuration: the first step (compilation and first touch) and a second step are
-   timed apart as warm-up; the second sets how many steps a repeat takes (about
-   `target` seconds, at least one); then `reps` repeats, reported as median, min and max.
+   timed apart as warm-up; then the scene relaxes untimed up to RELAX_STEPS steps in all (its
+   speeds spread out from their uniform start: the fastest circle, and with it the event
+   scheme's cells, grows over the first tens of steps), and one more step sets how many steps
+   a repeat takes (about `target` seconds, at least one); then `reps` repeats, reported as
+   median, min and max.
    Collisions per second: pair collisions per step over all repeats, times the median
    steps/s. The energy change and the largest overlap after the repeats go with every
    speed figure.
@@ -214,6 +217,11 @@ def _gb(rates):
 
 
 # ----------------------------------------------------------------- throughput
+#: Steps of a throughput row's scene before its timed repeats (see 1. above): the steady state of
+#: a run, not the cheaper first steps of a fresh scene.
+RELAX_STEPS = 60
+
+
 def measure_throughput(n, scheme, precision, reps, target, bound_bw, max_steps=100_000):
     box = box_for(n, AREA_FRACTION, ASPECT)
     scene = circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls", scheme=scheme,
@@ -228,7 +236,13 @@ def measure_throughput(n, scheme, precision, reps, target, bound_bw, max_steps=1
     t0 = now()
     sim.step(1)
     second_s = now() - t0
-    k = int(max(1, min(max_steps, round(target / max(second_s, 1e-9)))))
+    t0 = now()
+    sim.step(RELAX_STEPS - 2)
+    relax_s = now() - t0
+    t0 = now()
+    sim.step(1)
+    sizing_s = now() - t0
+    k = int(max(1, min(max_steps, round(target / max(sizing_s, 1e-9)))))
     st1 = sim.stats()
     times = []
     for _ in range(reps):
@@ -244,7 +258,8 @@ def measure_throughput(n, scheme, precision, reps, target, bound_bw, max_steps=1
     bound = bound_bw / bytes_per
     row = dict(
         n=n, scheme=scheme, precision=precision, dt=sim.dt, box_w=box[0], box_h=box[1], place_s=place_s,
-        warmup_first_step_s=first_s, warmup_second_step_s=second_s, steps_per_rep=k, reps=reps,
+        warmup_first_step_s=first_s, warmup_second_step_s=second_s, relax_steps=RELAX_STEPS, relax_s=relax_s,
+        steps_per_rep=k, reps=reps,
         steps_per_s_median=s["median"], steps_per_s_min=s["min"], steps_per_s_max=s["max"],
         circle_steps_per_s_median=n * s["median"], circle_steps_per_s_min=n * s["min"],
         circle_steps_per_s_max=n * s["max"],
@@ -693,6 +708,9 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
               md_table(["scheme", "prec", "first run s"],
                        [[c["scheme"], c["precision"], c["first_run_s"]] for c in compile_rows]), ""]
     lines += ["## Throughput", "",
+              f"Each row: its first and second steps timed apart, then {RELAX_STEPS} steps in all before the timed "
+              "repeats, so that the speeds have spread out from their start (a relaxed scene: the event scheme's "
+              "cells follow the fastest circle, which grows over the first tens of steps).", "",
               md_table(["N", "scheme", "prec", "dt", "warm-up 1st / 2nd step s", "steps/rep", "steps/s median [min, max]",
                         "circle-steps/s", "pair coll./s", "sim time / wall s", "of bound", "energy change",
                         "max overlap"],
