@@ -333,7 +333,9 @@ class Simulation:
         ncy = self.grid.ncy
         if self.grid.ncx < 3:
             return 0, 0
-        want = max(self.n // event.PART_CIRCLES, count_parts())
+        threads = count_parts()
+        # A multiple of the threads, so that they finish their share of the parts together.
+        want = -(-max(self.n // event.PART_CIRCLES, threads) // threads) * threads
         parts = min(want, ncy // event.PART_MIN_ROWS, event.MOST_PARTS)
         if parts < 2:
             return 0, 0

@@ -148,6 +148,27 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
+    """A split into parts (`Simulation._part_shape`) asks for a multiple of the threads, so that
+    they finish their shares together: one part more than the threads' count of PART_CIRCLES
+    rounds up to twice the threads, on a grid with rows enough for that."""
+    from circles import event
+    from circles.grid import count_parts
+
+    threads = count_parts()
+    if threads < 2:
+        pytest.skip("one thread: no parts")
+    on_threads(monkeypatch)
+    scene = SCENES["walls-f32-equal"]
+    monkeypatch.setattr(event, "PART_CIRCLES", scene["n"] // (threads + 1))
+    sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene))
+    sim.step(1)
+    assert sim._parts and sim.grid.ncy // event.PART_MIN_ROWS >= 2 * threads
+    parts, rows = sim._part_shape()
+    assert parts == 2 * threads and rows * (parts - 1) < sim.grid.ncy <= rows * parts
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, boundary):
     """event.split_parts on 4000 circles in strips of about 300: every pair within reach of
