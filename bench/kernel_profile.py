@@ -1,9 +1,11 @@
 """Where a step's time goes: per-kernel-task times from Taichi's kernel profiler.
 
     python bench/kernel_profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
+                                   [--warm 2]
 
 The bench scene (radius 0.5, area fraction 0.3, 16:9 walled box, speeds 0.5 to 1, float32,
-default dt). For each N and scheme: the scene is built and warmed up by two steps, then
+default dt). For each N and scheme: the scene is built and warmed up by `--warm` steps (2 by
+default; 60 to profile a relaxed scene, as bench.py's throughput rows time), then
 `steps` steps are timed one by one without the profiler (median and best circle-steps/s),
 then `steps` more with it, and the profiler's table is printed: each row one offloaded task
 of a kernel (on the GPU a task is one device kernel; `serial` tasks run on one thread),
@@ -45,11 +47,11 @@ def time_steps(sim, steps):
             end["kinetic_energy"] / start["kinetic_energy"] - 1, end["max_overlap"])
 
 
-def profile(n, scheme, steps):
+def profile(n, scheme, steps, warm=2):
     t0 = time.perf_counter()
     sim = circles.Simulation(bench_scene(n, scheme))
     place_s = time.perf_counter() - t0
-    sim.step(2)
+    sim.step(warm)
     rounds0 = sim.rounds
     times, pairs, energy_change, overlap = time_steps(sim, steps)
     print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {n / np.median(times) / 1e6:.3g} M circle-steps/s median, "
@@ -72,12 +74,15 @@ def main(argv=None):
     ap.add_argument("--n", type=float, nargs="+", default=[1e6])
     ap.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=("discrete", "event"))
     ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--warm", type=int, default=2, help="steps before the timed ones (at least 1)")
     args = ap.parse_args(argv)
+    if args.warm < 1:
+        ap.error(f"--warm {args.warm}: give at least 1 (the first step compiles)")
     arch = circles.init(arch=args.arch, kernel_profiler=True)
     print(f"arch {arch}, taichi {'.'.join(map(str, ti.__version__))}", flush=True)
     for n in args.n:
         for scheme in args.scheme:
-            profile(int(n), scheme, args.steps)
+            profile(int(n), scheme, args.steps, args.warm)
 
 
 if __name__ == "__main__":

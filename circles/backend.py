@@ -52,11 +52,12 @@ def current_arch() -> str | None:
 
 
 #: Up to this many circles, the loops of a step on a CPU run on one thread: starting a parallel
-#: loop on the CPU's thread pool costs tens of microseconds, more than a loop over a few
-#: thousand circles (on this project's 2-core machine, side by side: a discrete step runs at
-#: 1.6 times the circle-steps/s of two threads at 1e3, 1.0 to 1.5 times at 1e4, even at 3e4,
-#: 0.65 to 0.85 times at 1e5).
-SERIAL_N = 20_000
+#: loop on the CPU's thread pool costs tens of microseconds, and a discrete step starts about
+#: 35 (on this project's 2-core machine, the discrete scheme on one thread against two, both
+#: in one process stepped in turn after 30 steps, `bench/versus.py --interleave`: 1.76, 1.37
+#: and 1.22 times as fast at 3e4, 5e4 and 7e4 circles; in separate processes 1.2 to 1.3 times
+#: at 7e4, and two threads 1.2 times as fast at 1e5).
+SERIAL_N = 70_000
 #: The event scheme's limit, as circles times the CPU's threads: up to it, a step runs on one
 #: thread from one queue (`event.queue_step`, each pair's first time computed once) rather
 #: than in parts on every thread (`event.queue_parts`). The parts pay for their split, their

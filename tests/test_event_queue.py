@@ -42,9 +42,9 @@ def on_threads(monkeypatch):
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the limits are a CPU's")
 @pytest.mark.parametrize("threads", [1, 2, 8])
 def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypatch, threads):
-    """The event scheme runs on one thread (one queue, `event.queue_step`) up to
-    EVENT_SERIAL_WORK circles times the threads, and always with one thread (no parts); the
-    discrete scheme up to SERIAL_N circles, whatever the threads."""
+    """The event scheme runs on one thread (one queue, `event.queue_step`) while its circles
+    times the threads are at most EVENT_SERIAL_WORK, up to SERIAL_N circles whatever the
+    threads, and always with one thread (no parts); the discrete scheme up to SERIAL_N circles."""
     from circles import backend
     monkeypatch.setattr(backend, "cpu_threads", lambda: threads)
     limit = backend.EVENT_SERIAL_WORK // threads
