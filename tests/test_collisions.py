@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import TEST_ARCH
 from reference import Reference
 
 BOX = (1.0, 1.0)
@@ -267,14 +268,15 @@ def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):
     np.testing.assert_array_equal(a.vel, b.vel)
 
 
-def run_with_flag(circles, monkeypatch, scene, flag, steps, check):
-    """The discrete `scene` run `steps` single steps with `simulation.<flag>` True, then False:
-    a (state, stats, crowded) for each, crowded summing over the steps the circles whose contact
-    list overflowed (they search their cells). `check(sim, value)` looks at each new Simulation."""
+def run_with_flag(circles, monkeypatch, scene, flag, steps, check, values=(True, False), module=None):
+    """The discrete `scene` run `steps` single steps with `<module>.<flag>` (circles.simulation
+    by default) at each of two `values`: a (state, stats, crowded) for each, crowded summing
+    over the steps the circles whose contact list overflowed (they search their cells).
+    `check(sim, value)` looks at each new Simulation."""
     from circles import simulation
     runs = []
-    for value in (True, False):
-        monkeypatch.setattr(simulation, flag, value)
+    for value in values:
+        monkeypatch.setattr(module or simulation, flag, value)
         sim = circles.Simulation(scene)
         check(sim, value)
         crowded = 0
@@ -319,6 +321,24 @@ def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatc
     unequal = circles_cpu.Simulation.from_arrays(pos, np.zeros((2, 2)), np.array([R, R]), mass=np.array([1.0, 3.0]),
                                                  box=BOX, scheme="discrete")
     assert not unequal._uniform
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="one thread or several is a CPU's choice")
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_discrete_on_one_thread_equals_several(circles_cpu, monkeypatch, boundary):
+    """Scenes up to backend.SERIAL_N circles run every loop of a discrete step on one thread,
+    its rounds in one loop; larger ones run them on the threads. The state must not depend on
+    which: a dense, fast scene of mixed radii run both ways, the same bit for bit."""
+    from circles import backend
+
+    scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
+                              precision="f32", seed=5, dt=0.002, boundary=boundary)
+
+    def check(sim, limit):
+        assert sim._serial == (limit > 0) and (sim._parallel_rounds == 0) == sim._serial
+
+    runs = run_with_flag(circles_cpu, monkeypatch, scene, "SERIAL_N", 40, check, values=(10**9, 0), module=backend)
+    assert_runs_equal(runs, boundary, pairs=10000, walls=500)
 
 
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
