@@ -1088,7 +1088,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                                   margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
             ev_t[i] = t_i
             ev_p[i] = p_i
-    nb = head.shape[0]  # buckets: one per QUEUE_BUCKET_CIRCLES circles (the caller's allocation)
+    # Buckets: one per QUEUE_BUCKET_CIRCLES circles, and at most n, so that the loop below resets
+    # every one (the parts' calendars, which share the array, take more of it).
+    nb = ti.min(head.shape[0], ti.max(n // QUEUE_BUCKET_CIRCLES, 1))
     scale = ti.min(nb / t_end, 1e30)  # float64 (see `_bucket`)
     ti.loop_config(serialize=serial)
     for i in range(n):

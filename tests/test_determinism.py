@@ -39,6 +39,12 @@ SCRIPT = textwrap.dedent("""
 
     out, scenes = sys.argv[2], json.loads(sys.argv[3])
 """) + INIT + textwrap.dedent("""
+    # Every loop on the CPU's threads, as in a large scene (these scenes are small enough to
+    # run on one thread otherwise, see backend.serial_loops): with two threads the event
+    # queue runs in parts, with one from one queue.
+    from circles import backend
+    backend.SERIAL_N = 0
+    backend.EVENT_SERIAL_WORK = 0
     arrays = {}
     for name, kw in scenes.items():
         duration = kw.pop("duration")
@@ -55,6 +61,8 @@ SCRIPT = textwrap.dedent("""
 
 
 def test_same_state_with_1_and_2_threads(tmp_path):
+    """On the CPU each scene runs its loops on the threads (one queue for the event scheme
+    with one thread, parts with two); the states must agree bit for bit."""
     scenes = json.dumps({name: {k: list(v) if isinstance(v, tuple) else v for k, v in kw.items()}
                          for name, kw in SCENES.items()})
     first, second = compared_runs()
