@@ -1,7 +1,7 @@
 """Command line: ``circles run [SCENE.toml] [flags]`` simulates a scene and writes its frames.
 
 A scene comes from a TOML file (the Scene fields at top level, and a ``[run]`` table with
-``duration``, ``fps``, ``size``, ``color``, ``out`` and ``arch``), from flags, or from both:
+``duration``, ``fps``, ``size``, ``color``, ``out``, ``arch`` and ``threads``), from flags, or from both:
 flags override the file. Without a file the scene is the showcase below, which flags
 change in the same way; ``circles`` with no arguments at all runs the showcase.
 
@@ -47,6 +47,7 @@ RUN_DEFAULTS = {
     "color": "random",
     "out": DEFAULT_OUT,
     "arch": "auto",
+    "threads": 0,  # CPU threads: 0 takes all of them
 }
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -98,6 +99,9 @@ def _build_parser():
     output.add_argument("--color", choices=("random", "speed"),
                         help="each circle's own colour, or a colormap of its speed")
     output.add_argument("--arch", choices=("auto", "cpu", "gpu"), help="where to run")
+    output.add_argument("--threads", type=int, metavar="N",
+                        help="CPU threads to run on (default 0: all of them; the state does not "
+                             "depend on it)")
     output.add_argument("--out", metavar="PATH",
                         help=f"*.mp4, *.gif, or a folder for PNG frames (default "
                              f"{DEFAULT_OUT})")
@@ -181,6 +185,9 @@ def _run_options(file_run, args):
         if options[key] not in allowed:
             raise UsageError(f"{key} {options[key]!r} is unknown: use one of "
                              f"{', '.join(allowed)}")
+    threads = options["threads"]
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
+        raise UsageError(f"threads {threads!r} must be a whole number >= 0 (0 takes all the CPU's threads)")
     if not isinstance(options["out"], str) or not options["out"]:
         raise UsageError(f"out {options['out']!r} must be a path")
     return options
@@ -279,7 +286,8 @@ def _run(scene, options):
 
     started = time.perf_counter()
     try:
-        arch = circles.init(options["arch"])
+        threads = options["threads"]
+        arch = circles.init(options["arch"], **({"cpu_max_num_threads": threads} if threads else {}))
         # Placement can still refuse a scene that passed the checks of Scene, and
         # from_arrays checks what a CircleList leaves to it (such as the area fraction).
         sim = _simulation(scene)
@@ -346,6 +354,10 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
     rate = sim.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
+    if arch == "cpu":
+        from .backend import cpu_threads
+        threads = cpu_threads()
+        arch = f"cpu, {threads} thread{'s' if threads > 1 else ''}"
     lines = [
         ("circles", f"{sim.n} ({sim.scheme}, {sim.precision}, {sim.boundary}, {arch})"),
         ("simulated", f"{sim.time:.6g} s in {sim.steps} steps of dt <= {sim.dt:.3g} s"

@@ -47,13 +47,13 @@ def test_scene_file_with_flags_overriding_it(tmp_path):
         'n = 20\nbox = [4.0, 3.0]\nradius = 0.1\nspeed = [0.5, 1.0]\nmass = "equal"\n'
         'boundary = "periodic"\n\n'
         '[run]\nduration = 0.4\nfps = 5\nsize = "64x48"\ncolor = "speed"\n'
-        'out = "frames"\narch = "cpu"\n')
+        'out = "frames"\narch = "cpu"\nthreads = 1\n')
     result = run_cli(["run", "scene.toml", "--fps", "10"], tmp_path)
     assert result.returncode == 0, result.stderr
     pngs = sorted((tmp_path / "frames").glob("frame_*.png"))
     assert len(pngs) == 4  # 0.4 s at 10 (the flag), not 5 (the file), frames per second
     assert iio.imread(pngs[0]).shape == (48, 64, 3)
-    assert "20 (event, f64, periodic" in result.stdout
+    assert "20 (event, f64, periodic, cpu, 1 thread)" in result.stdout
 
 
 def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
@@ -91,6 +91,8 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     (["run", "--size", "0x720"], ["size", "0x720"]),
     (["run", "--fps", "0"], ["fps", "0"]),
     (["run", "--duration", "-1"], ["duration", "-1"]),
+    (["run", "--threads", "-1"], ["threads", "-1", ">= 0"]),
+    (["run", "--threads", "two"], ["--threads", "two"]),
     (["run", "--bogus"], ["--bogus"]),
     (["fly"], ["fly"]),
     (["run", "missing.toml"], ["missing.toml", "not found"]),
