@@ -21,12 +21,12 @@ failed; 130 stopped by Ctrl-C, with the frames made so far written and playable.
 
 import argparse
 import math
+import os
 import re
 import signal
 import sys
 import time
 import tomllib
-from pathlib import Path
 
 DEFAULT_OUT = "outputs/circles.mp4"
 # The showcase run, made when no scene file is given: 1500 circles of a range of sizes
@@ -188,6 +188,10 @@ def _run_options(file_run, args):
     threads = options["threads"]
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
         raise UsageError(f"threads {threads!r} must be a whole number >= 0 (0 takes all the CPU's threads)")
+    available = os.cpu_count() or 1
+    if threads > available:
+        raise UsageError(f"threads {threads} is more than this machine's {available} CPU threads: "
+                         f"give at most {available}, or 0 for all of them")
     if not isinstance(options["out"], str) or not options["out"]:
         raise UsageError(f"out {options['out']!r} must be a path")
     return options

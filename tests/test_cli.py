@@ -93,6 +93,7 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     (["run", "--duration", "-1"], ["duration", "-1"]),
     (["run", "--threads", "-1"], ["threads", "-1", ">= 0"]),
     (["run", "--threads", "two"], ["--threads", "two"]),
+    (["run", "--threads", "100000"], ["threads", "100000", "at most"]),
     (["run", "--bogus"], ["--bogus"]),
     (["fly"], ["fly"]),
     (["run", "missing.toml"], ["missing.toml", "not found"]),
