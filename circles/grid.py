@@ -14,9 +14,6 @@ holds every circle within that reach. The number of cells is capped (`max_cells`
 box would need more, cells are made larger, never smaller than the reach.
 """
 
-import math
-
-import numpy as np
 import taichi as ti
 
 from . import launch

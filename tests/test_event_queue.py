@@ -386,7 +386,6 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
     from physics_util import two_size_mixture
 
     pos, vel, radius, box = two_size_mixture(precision)
-    n = len(radius)
 
     def make(max_fraction, queue):
         monkeypatch.setattr(simulation, "TWO_LEVEL_MAX_FRACTION", max_fraction)
