@@ -17,6 +17,7 @@ box would need more, cells are made larger, never smaller than the reach.
 import taichi as ti
 
 from . import launch
+from .backend import cpu_threads
 from .geometry import cell_index, cell_total, cells_in, spans
 from .loops import each, unroll
 
@@ -114,9 +115,9 @@ CPU_GROUP = 8
 
 def count_parts() -> int:
     """Parts of the circles' range that `enter_cells` counts without atomics: one per CPU
-    thread; 0 on a GPU, which counts with an atomic add per circle (read when a kernel compiles)."""
-    cfg = ti.lang.impl.current_cfg()
-    return max(int(cfg.cpu_max_num_threads), 1) if cfg.arch in (ti.x64, ti.arm64) else 0
+    thread (`backend.cpu_threads`); 0 on a GPU, which counts with an atomic add per circle
+    (read when a kernel compiles)."""
+    return cpu_threads() if ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64) else 0
 
 
 @ti.func
