@@ -65,7 +65,7 @@ import json, sys, time
 import taichi as ti
 n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 sys.path.insert(0, sys.argv[4])
-sys.path.insert(0, sys.argv[7])
+sys.path.insert(0, sys.argv[6])
 import circles, circles_base
 from kernel_profile import bench_scene
 circles.init(arch=sys.argv[5])
@@ -74,7 +74,7 @@ sims = {}
 for name, pkg in (("base", circles_base), ("this", circles)):
     scene = bench_scene(n, scheme, seed=1)
     sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__}))
-    sims[name].step(int(sys.argv[8]))  # compiles every kernel of a step, the reorder of every 16th step included
+    sims[name].step(int(sys.argv[7]))  # compiles every kernel of a step, the reorder of every 16th step included
 start = {k: s.stats() for k, s in sims.items()}
 times = {"base": [], "this": []}
 for k in range(steps):
@@ -118,8 +118,8 @@ def run_paired(base_tree, n, scheme, steps, arch, warm):
     if not (pkg_dir / "circles_base").is_dir():
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, "",
-                          str(pkg_dir), str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
+    out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, str(pkg_dir),
+                          str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -170,29 +170,25 @@ def main():
                             speeds[name] += [n / t for t in result[name]["times"]]
                             last[name] = result[name]
                         pair_ratios += [b / t for b, t in zip(result["base"]["times"], result["this"]["times"])]
-                    med = {k: float(np.median(v)) for k, v in speeds.items()}
-                    q25, q50, q75 = np.percentile(pair_ratios, [25, 50, 75])
-                    cells = [f"{med[k] / 1e6:.3g} M [{min(speeds[k]) / 1e6:.3g}, {max(speeds[k]) / 1e6:.3g}]"
-                             for k in ("base", "this")]
-                    facts = [f"{last[k]['pairs']}, {last[k]['energy_change']:.2g}" for k in ("base", "this")]
-                    print(f"| {n} | {scheme} | {cells[0]} | {cells[1]} | {q50:.3f} [{q25:.3f}, {q75:.3f}] | "
-                          f"{facts[0]} | {facts[1]} |", flush=True)
-                    continue
-                for r in range(args.rounds):
-                    # Which tree runs first alternates too: on a loaded machine the first of two
-                    # back-to-back processes measured 10 to 20% faster, whichever tree it ran.
-                    pair = (("base", tmp), ("this", ROOT))
-                    for name, tree in (pair if r % 2 == 0 else pair[::-1]):
-                        result = run(tree, n, scheme, steps, args.arch, args.scene, args.warm)
-                        speeds[name] += [n / t for t in result["times"]]
-                        last[name] = result
+                else:
+                    for r in range(args.rounds):
+                        # Which tree runs first alternates too: on a loaded machine the first of two
+                        # back-to-back processes measured 10 to 20% faster, whichever tree it ran.
+                        pair = (("base", tmp), ("this", ROOT))
+                        for name, tree in (pair if r % 2 == 0 else pair[::-1]):
+                            result = run(tree, n, scheme, steps, args.arch, args.scene, args.warm)
+                            speeds[name] += [n / t for t in result["times"]]
+                            last[name] = result
                 med = {k: float(np.median(v)) for k, v in speeds.items()}
+                if args.interleave:
+                    q25, q50, q75 = np.percentile(pair_ratios, [25, 50, 75])
+                    ratio = f"{q50:.3f} [{q25:.3f}, {q75:.3f}]"
+                else:
+                    ratio = f"{med['this'] / med['base']:.2f}"
                 cells = [f"{med[k] / 1e6:.3g} M [{min(speeds[k]) / 1e6:.3g}, {max(speeds[k]) / 1e6:.3g}]"
                          for k in ("base", "this")]
                 facts = [f"{last[k]['pairs']}, {last[k]['energy_change']:.2g}" for k in ("base", "this")]
-                print(f"| {n} | {scheme} | {cells[0]} | {cells[1]} | {med['this'] / med['base']:.2f} | "
-                      f"{facts[0]} | {facts[1]} |", flush=True)
-
+                print(f"| {n} | {scheme} | {cells[0]} | {cells[1]} | {ratio} | {facts[0]} | {facts[1]} |", flush=True)
 
 if __name__ == "__main__":
     main()
