@@ -54,6 +54,18 @@ def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypa
         assert backend.serial_loops(n, "event") == expected, (n, threads)
 
 
+def assert_same_as_rounds(rounds, sim, keys=("pair_collisions",)):
+    """The queue's run `sim` the same as the rounds' bit for bit: positions, velocities, the
+    stats `keys` and the event log, after more than 1000 pair collisions."""
+    a, b = rounds.state(), sim.state()
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+    sa, sb = rounds.stats(), sim.stats()
+    for key in keys:
+        assert sa[key] == sb[key], key
+    assert sa["pair_collisions"] > 1000
+    assert np.array_equal(rounds.events(), sim.events())
+
+
 def run(circles, monkeypatch, scene, queue, steps=25):
     from circles import simulation
     monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
@@ -101,10 +113,7 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
     on_threads(monkeypatch)
     sim = run(circles_cpu, monkeypatch, SCENES[name], True)
     assert not sim._serial and sim._event_queue
-    a, b = rounds.state(), sim.state()
-    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
-    assert rounds.stats()["pair_collisions"] == sim.stats()["pair_collisions"] > 1000
-    assert np.array_equal(rounds.events(), sim.events())
+    assert_same_as_rounds(rounds, sim)
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
@@ -135,13 +144,7 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
         assert sim.parts_run == 0 and sim._windows == simulation.MOST_WINDOWS
     if name == "walls-f32-equal" and claims == 4:
         assert sim._windows > 1
-    a, b = rounds.state(), sim.state()
-    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
-    sa, sb = rounds.stats(), sim.stats()
-    for key in ("pair_collisions", "wall_collisions", "virial", "wall_impulse"):
-        assert sa[key] == sb[key], key
-    assert sa["pair_collisions"] > 1000
-    assert np.array_equal(rounds.events(), sim.events())
+    assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
     assert sim.cut_steps == rounds.cut_steps
     if name.endswith("-radius"):
         assert sim.cut_steps > 0
@@ -161,10 +164,7 @@ def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cp
     if sim._head.shape[0] <= sim.n:
         pytest.skip("one thread: no parts' calendar")
     assert sim._parts and sim.parts_run == 0 and sim.rounds == sim.steps + sim.cut_steps
-    a, b = rounds.state(), sim.state()
-    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
-    assert rounds.stats()["pair_collisions"] == sim.stats()["pair_collisions"] > 1000
-    assert np.array_equal(rounds.events(), sim.events())
+    assert_same_as_rounds(rounds, sim)
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
