@@ -49,7 +49,7 @@ R_CUT, R_MAX = 0, 1
 
 
 @ti.func
-def radius_of(i, radius: ti.template(), uniform: ti.template()):
+def per_circle(i, radius: ti.template(), uniform: ti.template()):
     """Circle i's entry of `radius` (or of any per-circle array that `uniform` covers: the
     inverse masses too); with `uniform` (every circle has the same radius and mass) the first
     circle's, which stays in the cache: a scene of equal circles reads none per circle."""
@@ -72,7 +72,7 @@ def _moved(i, a: ti.template()):
             if x[k] >= box[k]:
                 x[k] -= box[k]
     else:
-        r = radius_of(i, a[2], a[11])
+        r = per_circle(i, a[2], a[11])
         if x[0] < r or x[0] > box[0] - r or x[1] < r or x[1] > box[1] - r:
             a[4][ti.atomic_add(a[5][WALLED], 1)] = i
     return x
@@ -204,7 +204,7 @@ def _record_contact(i, j, pos: ti.template(), vel: ti.template(), radius: ti.tem
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
-    s = radius_of(lo, radius, uniform) + radius_of(hi, radius, uniform)
+    s = per_circle(lo, radius, uniform) + per_circle(hi, radius, uniform)
     if d.dot(d) < s * s:
         _record_overlap(lo, hi, d, vel, contacts, n_contacts, marked, rnd)
 
@@ -274,13 +274,13 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
             # i's own values read once (a walled box: no images), each neighbour's straight
             # from its slot, with no min and max of the two before the loads.
             xi = pos[i]
-            ri = radius_of(i, radius, uniform)
+            ri = per_circle(i, radius, uniform)
             for m in range(count):
                 k = own + 1 + m if m < n_a else b_lo + m - n_a
                 j = sorted_ids[k]
                 if not is_large(j, radius, spread, two_level):
                     d = pos[j] - xi
-                    s = ri + radius_of(j, radius, uniform)
+                    s = ri + per_circle(j, radius, uniform)
                     if d.dot(d) < s * s:
                         _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
         else:
@@ -314,7 +314,7 @@ def _consider(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template(
     lo = ti.min(i, j)
     hi = ti.max(i, j)
     d = displacement(pos[lo], pos[hi], box, periodic)
-    s = radius_of(lo, radius, uniform) + radius_of(hi, radius, uniform)
+    s = per_circle(lo, radius, uniform) + per_circle(hi, radius, uniform)
     dist2 = d.dot(d)
     overlapping = dist2 < s * s
     if overlapping:
@@ -446,7 +446,7 @@ def _enlist_overlapping(i, rnd, pos: ti.template(), radius: ti.template(), marke
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 d = displacement(pos[i], pos[j], box, periodic)
-                s = radius_of(i, radius, uniform) + radius_of(j, radius, uniform)
+                s = per_circle(i, radius, uniform) + per_circle(j, radius, uniform)
                 if d.dot(d) < s * s:
                     _enlist(j, rnd, marked, lists, work, side)
 
@@ -484,16 +484,16 @@ def _collide(i, j, pos: ti.template(), vel: ti.template(), radius: ti.template()
     vn = (vel[j] - vel[i]).dot(nrm)
     hit = vn < 0
     if hit:
-        wi = radius_of(i, inv_mass, uniform)
-        wj = radius_of(j, inv_mass, uniform)
+        wi = per_circle(i, inv_mass, uniform)
+        wj = per_circle(j, inv_mass, uniform)
         jmp = 2.0 * vn / (wi + wj)
         # Same expression for both circles: rounding does not depend on which one is i.
         vel[i] = vel[i] + (wi * jmp) * nrm
         vel[j] = vel[j] + (wj * jmp) * (-nrm)
         owner = i if ids[i] < ids[j] else j
         pair_count[owner] = pair_count[owner] + 1
-        virial[owner] = virial[owner] + (ti.cast(radius_of(i, radius, uniform) + radius_of(j, radius, uniform), ti.f64)
-                                         * ti.abs(ti.cast(jmp, ti.f64)))
+        s = per_circle(i, radius, uniform) + per_circle(j, radius, uniform)
+        virial[owner] = virial[owner] + ti.cast(s, ti.f64) * ti.abs(ti.cast(jmp, ti.f64))
     return hit
 
 
@@ -561,7 +561,7 @@ def _first_round_in_parts(pos: ti.template(), vel: ti.template(), radius: ti.tem
         if it % PART_ITERATIONS == 0:
             box = ti.Vector([box_w, box_h], dt=real)
             k = it // PART_ITERATIONS
-            lo, hi = _part_range(n, k, np_)
+            lo = _part_range(n, k, np_)[0]
             rnd = work[ROUND]
             for q in range(lo, lo + work[PART_PICKS + k]):
                 _resolve_one(lists[0, q], rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial,
@@ -603,7 +603,7 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
     velocity when it points outwards."""
     x = pos[i]
     v = vel[i]
-    r = radius_of(i, radius, uniform)
+    r = per_circle(i, radius, uniform)
     for a in ti.static(range(2)):
         lo = r
         hi = box[a] - r
@@ -621,7 +621,7 @@ def _wall(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
         if hit:
             wall_count[i] = wall_count[i] + 1
             wall_impulse[i] = wall_impulse[i] + (2.0 * ti.abs(ti.cast(v[a], ti.f64))
-                                                 / ti.cast(radius_of(i, inv_mass, uniform), ti.f64))
+                                                 / ti.cast(per_circle(i, inv_mass, uniform), ti.f64))
     pos[i] = x
     vel[i] = v
 
@@ -729,9 +729,9 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     in one launch (launches cost tens of microseconds each, which is the whole step for a few
     thousand circles). Returns the length of the next round's work list: not 0 when more
     rounds are needed (the walls wait for them). With `uniform`, every circle has the radius
-    and the mass of the first (`radius_of`); with `first_parts`, the first round runs in parts
+    and the mass of the first (`per_circle`); with `first_parts`, the first round runs in parts
     (`_first_round_in_parts`)."""
-    # serial_from = 0: the whole step on one thread (see backend.SERIAL_N).
+    # serial_from = 0: the whole step on one thread (see backend.serial_loops).
     serial = ti.static(serial_from == 0)
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
           inv_ch, dt, box_w, box_h, real, periodic, uniform, serial)

@@ -534,7 +534,6 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
     can change, so the sweeps end when no circle is active.
     """
     n = pos.shape[0]
-    horizon = ti.cast(t_end, real)
     two_v = ti.cast(2.0 * vlim, real)
     changed = 0
     for k in range(n):
@@ -620,7 +619,7 @@ def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, vir
                wall_impulse_b: ndarr, dirty: ndarr, moved: ndarr, scalars: ndarr, real: ti.template(),
                serial: ti.template()):
     """Back up what a step changes (a cut step is redone from it), and mark every circle to predict
-    in full; with `serial`, on one thread (see backend.SERIAL_N)."""
+    in full; with `serial`, on one thread (see backend.serial_loops)."""
     ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         pos_b[i] = pos[i]
@@ -1069,7 +1068,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
     large, and `margin` is the most two circles can close in on each other in the step. With
-    `serial`, the first predictions too run on one thread (see backend.SERIAL_N), each pair's
+    `serial`, the first predictions too run on one thread (see backend.serial_loops), each pair's
     time computed once (`_first_events_once`, one grid level)."""
     n = pos.shape[0]
     horizon = ti.cast(t_end, real)

@@ -64,7 +64,7 @@ def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), parts: ti.template(),
                 ncx, ncy, inv_cw, inv_ch, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
     """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel;
-    with `serial`, every loop on one thread (see backend.SERIAL_N). Masked (circles whose
+    with `serial`, every loop on one thread (see backend.serial_loops). Masked (circles whose
     `include` is 0 left out, cell_of -1): an atomic add per circle, as on a GPU.
 
     `cell_count` must be all zero on entry; it is left all zero (each chunk clears its counts
@@ -231,7 +231,7 @@ def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(
 def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), cell_start: ti.template(),
                  sorted_ids: ti.template(), ncx, ncy, periodic: ti.template(), serial: ti.template()):
     """The stages after counting: cell starts, then ids scattered into their slots; with
-    `serial`, every loop on one thread (see backend.SERIAL_N)."""
+    `serial`, every loop on one thread (see backend.serial_loops)."""
     prefix_sum(cell_count, cell_start, cells_in(ncx, ncy, periodic), serial)
     if ti.static(count_parts() == 0):
         each(cell_of.shape[0], _scatter, (cell_of, slot, cell_start, sorted_ids), serial)
@@ -443,7 +443,7 @@ class Grid:
     """Cell lists over a fixed number of circles, with a fixed cell capacity."""
 
     def __init__(self, n: int, box, periodic: bool, max_cells=None, serial=False):
-        """`serial`: build on one thread (see backend.SERIAL_N)."""
+        """`serial`: build on one thread (see backend.serial_loops)."""
         self.n = n
         self.serial = bool(serial)
         self.box = (float(box[0]), float(box[1]))

@@ -32,7 +32,7 @@ def max_speed(pos, vel, out, serial=False) -> float:
 
     `out`: a float64 ndarray of 2 elements. One launch, whose kernel returns the value (a
     separate read-back would cost a second launch). `serial`: on one thread, on a CPU (see
-    backend.SERIAL_N).
+    backend.serial_loops).
     """
     if current_arch() == "gpu":
         return _max_speed(pos, vel, out, STRIDED_THREADS)
@@ -130,7 +130,7 @@ def permute_state(order: ndarr, pos: ndarr, vel: ndarr, radius: ndarr, inv_mass:
     copies: each kind's arrays are gathered along a chain from a free array of their kind
     (`_gather_chain`), so that pos' is in vec_free, vel' in pos's array, and vel's array is
     free after (see Simulation._reorder, which renames them). With `serial`, on one thread
-    (see backend.SERIAL_N)."""
+    (see backend.serial_loops)."""
     _gather_chain(order, (vec_free, pos, vel), serial)
     _gather_chain(order, (real_free, radius, inv_mass), serial)
     _gather_chain(order, (int_free, ids, pair_count, wall_count), serial)

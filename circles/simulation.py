@@ -71,7 +71,7 @@ MAX_BOUND_SWEEPS = 10_000
 #: cells); at most discrete.MOST_CONTACTS.
 DISCRETE_CONTACTS = 4
 #: The discrete scheme on circles that all share one radius and one mass reads the first
-#: circle's (`discrete.radius_of`), not each circle's: the same numbers, fewer loads. False:
+#: circle's (`discrete.per_circle`), not each circle's: the same numbers, fewer loads. False:
 #: every scene reads them per circle (for tests that compare the two).
 DISCRETE_UNIFORM = True
 #: The discrete scheme's first round of a step on a CPU's threads: in one part of the circles
@@ -304,20 +304,25 @@ class Simulation:
             self._first_parts = DISCRETE_FIRST_IN_PARTS and count_parts() > 1
 
     def _setup_parts(self):
-        """The arrays of an event queue split into parts (`event.split_parts`): on a CPU, with one
-        grid level, when the step's loops run on several threads."""
+        """The event queue's calendar heads, and the arrays of a queue split into parts
+        (`event.split_parts`): on a CPU, with one grid level, when the step's loops run on
+        several threads."""
         self._parts = self._event_queue and not self._serial and not self._two_level and count_parts() > 1
         self._split_wait = 0  # steps left before a split is tried again after one failed
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
+        n = self.n
+        # The calendar's bucket heads (`event.queue_step`); each part's calendar takes one bucket
+        # more than its share (see event.queue_parts).
+        buckets = max(n // event.QUEUE_BUCKET_CIRCLES, 1) if self._event_queue else 1
+        if self._parts:
+            buckets = n // event.QUEUE_BUCKET_CIRCLES + event.MOST_PARTS + 1
+        self._head = ti.ndarray(ti.i32, shape=buckets)
         if not self._parts:
             return
-        n = self.n
         self._label = ti.ndarray(ti.i32, shape=n)
         self._claimed = ti.ndarray(ti.i32, shape=max(n // PART_CLAIMS, 1))
         self._part_info = ti.ndarray(ti.i32, shape=event.part_info_size(event.MOST_PARTS))
         self._part_result = ti.ndarray(ti.f64, shape=event.MOST_PARTS)
-        # Each part's calendar takes one bucket more than its share (see event.queue_parts).
-        self._head = ti.ndarray(ti.i32, shape=n // event.QUEUE_BUCKET_CIRCLES + event.MOST_PARTS + 1)
         # What a step's events changed, put back when a collision would outrun the grid
         # (`_queue_parts_step`), and the flags of its windows.
         self._backup = {name: self._like(getattr(self, name)) for name in BACKUP_ORDER}
@@ -376,8 +381,8 @@ class Simulation:
         self._d1 = ti.ndarray(real, shape=n)
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
-        # The queue's calendar (`event.queue_step`): bucket heads, and each circle's back link.
-        self._head = ti.ndarray(ti.i32, shape=max(n // event.QUEUE_BUCKET_CIRCLES, 1) if self._event_queue else 1)
+        # The queue's calendar (`event.queue_step`): each circle's back link (the bucket heads:
+        # `_setup_parts`, which knows whether the queue is split).
         self._prv = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)
         # The queue's list of neighbours that search again after an event (`event.queue_step`).
         self._pending = ti.ndarray(ti.i32, shape=n if self._event_queue else 1)

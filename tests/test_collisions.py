@@ -305,7 +305,7 @@ def assert_runs_equal(runs, boundary, pairs, walls):
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatch, boundary):
     """A discrete scene whose circles share one radius and one mass reads the first circle's
-    (`discrete.radius_of`): the run must be the same bit for bit as one that reads each
+    (`discrete.per_circle`): the run must be the same bit for bit as one that reads each
     circle's, on a dense, fast scene whose circles overlap several others at once (contact
     lists that overflow into cell searches) and hit the walls. Equal radii with unequal
     masses read per circle (test_unequal_masses_follow_1d_formula checks their outcome)."""
