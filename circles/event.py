@@ -1121,9 +1121,18 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 
 # ------------------------------------------------------------------ parts (CPU, several threads)
 #
-# Two circles can meet within a window [t0, t1] of the step only if at t0 they are within the
-# sum of their radii and 2 vlim (t1 - t0) of each other: neither moves faster than vlim. Call
-# such circles linked. A set of circles closed under links (a cluster and its like) evolves
+# No circle moves faster than vlim within a step, so none travels farther than vlim W in a
+# window [t0, t1] of it (W = t1 - t0). Most travel much less: until its first collision a
+# circle keeps its own speed s, and that collision cannot come before its nearest neighbour,
+# at a gap g at t0, could close in at vlim: not before t0 + f, f = g / (s + vlim). So circle i
+# travels at most its reach R_i = s f + vlim (W - f), with f at most W (`_reach_of`), and two
+# circles can meet within the window only if at t0 they are within the sum of their radii and
+# of their reaches of each other (the nearest circle is looked for in the 3 x 3 cells, which
+# hold every circle within 2 vlim W of the gap, beyond which f is W anyway). Call such circles
+# linked. In the bench scene at 1e6 the reaches are about half vlim W on average, and the
+# clusters across the borders of a split hold 4.5 times fewer circles than with 2 vlim W for
+# every pair (22000 to 27000 circles against 83000 to 130000 at each split, windows of half a
+# step). A set of circles closed under links (a cluster and its like) evolves
 # through the window on its own: no event outside it touches its circles or changes a time
 # of impact that comes due in the window. `split_parts` cuts the box into strips of rows of
 # cells and gives each strip's circles a part, except that every cluster that crosses the
@@ -1134,8 +1143,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # and commute), and a part's arrays are a fraction of the whole (tens of thousands of circles)
 # while its events run, so they are mostly in the cache.
 #
-# Over a whole step the clusters can span the box (at the bench's density and step, links
-# reach 1.7 diameters and the clusters across borders hold 92% of 1e6 circles): the step runs
+# Over a whole step the clusters can span the box (at the bench's density and step, with 2 vlim
+# W for every pair, links reach 1.7 diameters and the clusters across borders hold 92% of 1e6
+# circles; with the reaches, the clusters of a whole step still span the box): the step runs
 # in windows, each split anew (see `Simulation._queue_parts_step`). A part's searches meet
 # only its own circles, so a circle's event past the window can miss a pair with another
 # part: a search that meets a neighbour in another part flags the circle (`_earliest`,
@@ -1167,15 +1177,59 @@ def _place_at(x, t, pos: ti.template(), vel: ti.template(), tau: ti.template()):
 
 
 @ti.func
+def _reach_of(i, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
+              links: ti.template(), periodic: ti.template()):
+    """How far circle i can travel in the window from t (float64, see above; with the 1%
+    allowance). links: (window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+    segs); the value is computed at its first use in a split and kept in reach[i], rounded up
+    to reach's precision (below 0: not computed yet)."""
+    window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs = ti.static(links)
+    d_i = ti.cast(reach[i], ti.f64)
+    if d_i < 0:
+        xi = _place_at(i, t, pos, vel, tau)
+        ri = ti.cast(radius[i], ti.f64)
+        # Beyond i's 3 x 3 cells a circle is too far to meet i in the window: the gap to it is
+        # at least 2 vlim window, and `free` below comes out as the window.
+        gap = ti.cast(NEVER, ti.f64)
+        for r in range(rows * segs):
+            row, seg = run_parts(r, segs, periodic)
+            k_lo, k_hi = neighbour_range(cell_of[i], row, seg, cell_start, ncx, ncy, periodic)
+            for k in range(k_lo, k_hi):
+                j = sorted_ids[k]
+                if j != i:
+                    d = _place_at(j, t, pos, vel, tau) - xi
+                    if ti.static(periodic):
+                        d -= box * ti.round(d / box)
+                    gap = ti.min(gap, d.norm() - ri - ti.cast(radius[j], ti.f64))
+        speed = ti.cast(vel[i], ti.f64).norm()
+        # No pair event of i before t + free: a neighbour closes in at vlim at most.
+        free = ti.min(ti.max(gap, 0.0) / (speed + vlim), window)
+        d_i = (speed * free + vlim * (window - free)) * 1.01
+        # Stored from a value a little above, rounded to nearest in float32 or float64: not
+        # below d_i; read back, so that its first use takes the value its later ones read.
+        reach[i] = d_i * (1.0 + 2.0 ** -20)
+        d_i = ti.cast(reach[i], ti.f64)
+    return d_i
+
+
+@ti.func
 def _linked(xp, rx, j, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
-            periodic: ti.template()):
-    """Whether circle j at time t lies within rx + its radius of xp (float64; the nearest image
-    in a periodic box)."""
+            links: ti.template(), periodic: ti.template()):
+    """Whether circle j at time t lies within rx + its radius + its reach (`_reach_of`) of xp
+    (float64; the nearest image in a periodic box). No circle's stored reach is above 1.02
+    vlim times the window (1.01 with the allowance, the rounding up of the store and a speed
+    over vlim by round-off inside): that is tested first, and most pairs fail it, so their
+    second circle's reach is not computed."""
     d = _place_at(j, t, pos, vel, tau) - xp
     if ti.static(periodic):
         d -= box * ti.round(d / box)
+    d2 = d.dot(d)
     q = rx + ti.cast(radius[j], ti.f64)
-    return d.dot(d) < q * q
+    linked = False
+    if d2 < (q + 1.02 * links[1] * links[0]) ** 2:
+        q += _reach_of(j, t, box, pos, vel, tau, radius, links, periodic)
+        linked = d2 < q * q
+    return linked
 
 
 @ti.func
@@ -1214,8 +1268,8 @@ def _strip_of(c, ncx, rows_per, parts, periodic: ti.template()):
 @ti.func
 def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template(), tau: ti.template(),
                    radius: ti.template(), label: ti.template(), claimed: ti.template(), cell_of: ti.template(),
-                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, reach,
-                   periodic: ti.template()):
+                   cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, links: ti.template(),
+                   allowance, periodic: ti.template()):
     """Claim for border b the cluster of circle i (in slot s): every circle linked to a claimed
     one, breadth first, each labelled -1 - b with an atomic minimum and its slot listed in
     claimed[lo:hi]. Returns the end of the list, or -1 when it runs out of room or meets a
@@ -1231,14 +1285,14 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
         x = sorted_ids[claimed[m]]
         m += 1
         xp = _place_at(x, t, pos, vel, tau)
-        rx = ti.cast(radius[x], ti.f64) + reach
+        rx = ti.cast(radius[x], ti.f64) + _reach_of(x, t, box, pos, vel, tau, radius, links, periodic) + allowance
         for r in range(rows * segs):
             row, seg = run_parts(r, segs, periodic)
             k_lo, k_hi = neighbour_range(cell_of[x], row, seg, cell_start, ncx, ncy, periodic)
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 if top >= 0 and label[j] != -1 - b:
-                    if _linked(xp, rx, j, t, box, pos, vel, tau, radius, periodic):
+                    if _linked(xp, rx, j, t, box, pos, vel, tau, radius, links, periodic):
                         old = ti.atomic_min(label[j], -1 - b)
                         if old >= 0 and top < hi:
                             claimed[top] = k
@@ -1250,15 +1304,15 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
 
 
 @launch.kernel
-def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, info: ndarr,
-                cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32,
-                segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64, box_h: ti.f64, t: ti.f64,
-                margin: ti.f64, periodic: ti.template()) -> ti.i32:
+def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, reach: ndarr,
+                info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+                rows: ti.i32, segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64, box_h: ti.f64, t: ti.f64,
+                window: ti.f64, vlim: ti.f64, allowance: ti.f64, periodic: ti.template()) -> ti.i32:
     """Split the circles into `parts` parts (see above): strips of `rows_per` rows of cells (the
     last takes the rest), circle i of strip k labelled k, except the clusters of linked
-    circles (those within reach plus `margin` at time t, the most two circles close in on each
-    other from t to the end of the window of the step that the parts run, with a 1%
-    allowance) that cross a border: each goes whole to the strip below the border (in a
+    circles (see above: at time t, for the window of length `window` that the parts run, the
+    circles no faster than vlim; the reaches with a 1% allowance and `allowance` more,
+    `reach` their store) that cross a border: each goes whole to the strip below the border (in a
     periodic box, the border between the last strip and the first is the last strip's), its
     circles labelled -1 - k and their slots listed in `claimed`, part k's from
     info[parts + 1 + k] to info[2 parts + 1 + k] (each border has an equal share of `claimed`;
@@ -1269,6 +1323,7 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
     n = pos.shape[0]
     for i in range(n):
         label[i] = _strip_of(cell_of[i], ncx, rows_per, parts, periodic)
+        reach[i] = -1.0
     taken = 3 * parts + 1
     ok = 3 * parts + 2
     borders = parts - 1
@@ -1279,8 +1334,8 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
     share = claimed.shape[0] // ti.max(borders, 1)
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
-            reach = margin * 1.01
             box = ti.Vector([box_w, box_h], dt=ti.f64)
+            links = ti.static((window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs))
             while True:
                 b = ti.atomic_add(info[taken], 1)
                 if b >= borders:
@@ -1295,17 +1350,20 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                     i = sorted_ids[s]
                     if label[i] >= 0:  # else claimed with its cluster already
                         xp = _place_at(i, t, pos, vel, tau)
-                        rx = ti.cast(radius[i], ti.f64) + reach
+                        rx = (ti.cast(radius[i], ti.f64) + _reach_of(i, t, box, pos, vel, tau, radius, links, periodic)
+                              + allowance)
                         crosses = False
                         for seg in range(segs):
                             a_lo, a_hi = neighbour_range(cell_of[i], 2, seg, cell_start, ncx, ncy, periodic)
                             for k in range(a_lo, a_hi):
-                                if _linked(xp, rx, sorted_ids[k], t, box, pos, vel, tau, radius, periodic):
-                                    crosses = True
+                                if not crosses:
+                                    if _linked(xp, rx, sorted_ids[k], t, box, pos, vel, tau, radius, links,
+                                               periodic):
+                                        crosses = True
                         if crosses:
                             top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, radius,
                                                  label, claimed, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-                                                 segs, reach, periodic)
+                                                 segs, links, allowance, periodic)
                 if top < 0:
                     info[ok] = 0
                     top = b * share

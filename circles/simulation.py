@@ -54,6 +54,9 @@ EVENT_QUEUE_ON_CPU = True
 SPLIT_RETRY_STEPS = 16
 #: A split into parts claims at most n / PART_CLAIMS circles with their clusters across borders.
 PART_CLAIMS = 4
+#: The split's links (`event.split_parts`) reach this many units in the last place of the
+#: largest coordinate further, against the round-off of the positions within a window.
+LINK_ALLOWANCE_ULPS = 16
 #: The arrays of a circle's state that an event step changes, in the order event.queue_parts
 #: takes their backups.
 BACKUP_ORDER = ("pos", "vel", "tau", "pair_count", "virial", "wall_count", "wall_impulse")
@@ -331,6 +334,8 @@ class Simulation:
         self._mark = 0
         self._touched = ti.ndarray(ti.i32, shape=n)
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
+        # The split's absolute allowance on links, against round-off in the window's positions.
+        self._link_allowance = LINK_ALLOWANCE_ULPS * float(np.finfo(self._np_real).eps) * max(self.box)
 
     def _part_shape(self):
         """(parts, rows of cells per part) of this step's split (`event.split_parts`); parts < 2: none
@@ -685,9 +690,10 @@ class Simulation:
                                 periodic)
             while True:
                 t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
+                # The circles' reaches are kept in _d1, the queues' scratch of heap times.
                 if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
-                                     self._part_info, *cell_args, rows_per, parts, w, hgt, t0, 2.0 * vlim * (t1 - t0),
-                                     periodic):
+                                     self._d1, self._part_info, *cell_args, rows_per, parts, w, hgt, t0, t1 - t0,
+                                     vlim, self._link_allowance, periodic):
                     break
                 if self._windows >= MOST_WINDOWS:
                     self._split_wait = SPLIT_RETRY_STEPS

@@ -152,14 +152,17 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cpu, monkeypatch):
-    """400 circles at area fraction 0.75 with their loops on the threads: every split fails (the
-    clusters span the box), so each step runs from one queue, whose calendar then uses the
-    parts' array of bucket heads, longer than the circles are many. Every bucket must start
-    empty (stale lists from an earlier step once gave wrong events and crashes), and the
-    state and events must equal the rounds' bit for bit."""
+    """400 circles at area fraction 0.75 with their loops on the threads and no room for claims:
+    every split fails (clusters cross the borders), so each step runs from one queue, whose
+    calendar then uses the parts' array of bucket heads, longer than the circles are many.
+    Every bucket must start empty (stale lists from an earlier step once gave wrong events and
+    crashes), and the state and events must equal the rounds' bit for bit."""
+    from circles import simulation
+
     scene = dict(n=400, box=(0.164, 0.164), radius=0.004, speed=(0.5, 1.0), boundary="walls", precision="f64")
     rounds = run(circles_cpu, monkeypatch, scene, False, steps=6)
     on_threads(monkeypatch)
+    monkeypatch.setattr(simulation, "PART_CLAIMS", 10**9)
     sim = run(circles_cpu, monkeypatch, scene, True, steps=6)
     if sim._head.shape[0] <= sim.n:
         pytest.skip("one thread: no parts' calendar")
@@ -191,11 +194,16 @@ def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, boundary):
-    """event.split_parts on 4000 circles in strips of about 300: every pair within reach of
-    each other (the sum of their radii and the margin, found here by brute force over all
-    pairs) lies in one part, the clusters claimed across borders among them; and the parts'
-    lists (a strip's circles labelled with it, then the circles claimed for it, labelled
-    -1 - k) hold every circle once, in parts of the sizes the split reports."""
+    """event.split_parts on 4000 circles (speeds from 0 to 1, so that slow circles sit beside
+    fast ones) in strips of about 300, for a window of a quarter step. Every pair of linked
+    circles lies in one part: pairs within the sum of their radii and their reaches, found
+    here by brute force over all pairs, a circle's reach being the farthest it can travel in
+    the window (`event._reach_of`: at its own speed until the nearest circle could reach it at
+    the speed limit vlim, then at vlim). Those links are far fewer than the pairs within
+    2 vlim times the window, the bound for any two circles. The parts' lists (a strip's
+    circles labelled with it, then the circles claimed for it, labelled -1 - k) hold every
+    circle once, in parts of the sizes the split reports. And the window itself, run from
+    one queue for all circles, has no collision between two parts."""
     from circles import event
     from circles.geometry import spans
     from circles.simulation import SPEED_MARGIN
@@ -203,32 +211,48 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     on_threads(monkeypatch)
     monkeypatch.setattr(event, "PART_CIRCLES", 300)
     n, box = 4000, np.array([1.0, 1.0])
-    sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=tuple(box), radius=0.005, speed=(0.5, 1.0),
-                                                   boundary=boundary, scheme="event", precision="f64", seed=2))
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=tuple(box), radius=0.005, speed=(0.0, 1.0),
+                                                   boundary=boundary, scheme="event", precision="f64", seed=2),
+                                 record_events=100_000)
     sim.step(3)
     periodic = boundary == "periodic"
-    margin = 0.5 * SPEED_MARGIN * sim._max_speed() * sim.dt  # two circles closing in for a quarter step
+    vlim = SPEED_MARGIN * sim._max_speed()  # as the step after this one sets it
+    window = 0.25 * sim.dt
+    margin = 2 * vlim * window  # two circles closing in at vlim for the window
     g = sim.grid
     g.build(sim.pos, 2 * sim._rmax + margin)
     parts, rows_per = sim._part_shape()
     assert sim._parts and parts >= 8
     rows, segs = spans(g.ncx, g.ncy, periodic)
-    assert event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, sim._claimed, sim._part_info,
-                             g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
-                             *box, 0.0, margin, periodic)
+    assert event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, sim._claimed, sim._d1,
+                             sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs,
+                             rows_per, parts, *box, 0.0, window, vlim, sim._link_allowance, periodic)
     label = sim._label.to_numpy()
     part = label ^ (label >> 31)
-    pos, r = sim.pos.to_numpy(), sim.radius.to_numpy()  # every clock is at 0 between steps
-    linked = 0
-    for lo in range(0, n, 500):
+    pos, vel, r = sim.pos.to_numpy(), sim.vel.to_numpy(), sim.radius.to_numpy()  # every clock is at 0
+
+    def pairs_from(lo):
         d = pos[None, :, :] - pos[lo:lo + 500, None, :]
         if periodic:
             d -= box * np.round(d / box)
-        near = (d ** 2).sum(-1) < (r[lo:lo + 500, None] + r[None, :] + margin) ** 2
-        i, j = np.nonzero(near)
+        dist = np.sqrt((d ** 2).sum(-1))
+        dist[np.arange(len(dist)), np.arange(lo, lo + len(dist))] = np.inf
+        return dist, r[lo:lo + 500, None] + r[None, :]
+
+    gap = np.concatenate([(dist - s).min(axis=1) for dist, s in map(pairs_from, range(0, n, 500))])
+    speed = np.sqrt((vel ** 2).sum(-1))
+    free = np.minimum(np.maximum(gap, 0) / (speed + vlim), window)
+    reach = (speed * free + vlim * (window - free)) * 1.01
+    linked = loose = 0
+    for lo in range(0, n, 500):
+        dist, s = pairs_from(lo)
+        i, j = np.nonzero(dist < s + reach[lo:lo + 500, None] + reach[None, :])
         i += lo
         assert np.array_equal(part[i], part[j])
-        linked += np.sum(i != j)
+        linked += len(i)
+        loose += np.sum(dist < s + margin)
+    assert linked > 1000 and loose > 1.5 * linked  # pairs linked (each counted from both circles)
+    assert np.sum(label < 0) > 20  # circles claimed with their clusters across borders
     info, claimed = sim._part_info.to_numpy(), sim._claimed.to_numpy()
     sorted_ids, cell_start = g.sorted_ids.to_numpy(), g.cell_start.to_numpy()
 
@@ -245,8 +269,15 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
         assert len(mine) == info[k + 1] - info[k]
         members.append(mine)
     assert np.array_equal(np.sort(np.concatenate(members)), np.arange(n))
-    assert linked > 2000 and np.sum(label < 0) > 100  # pairs within reach (each counted from both circles),
-    # and circles claimed with their clusters across borders
+    # The window from one queue for all circles (`_split_wait`: no split for a while).
+    start, logged = sim.time, len(sim.events())
+    sim._split_wait = 10
+    sim.advance(window)
+    ev = sim.events()
+    ev = ev[(ev[:, 2] >= 0) & (ev[:, 0] > start)]  # pair collisions in the window
+    assert len(sim.events()) > logged and len(ev) > 50
+    slot = np.argsort(sim.ids.to_numpy())  # creation id -> slot (no reorder since the split)
+    assert np.array_equal(part[slot[ev[:, 1].astype(int)]], part[slot[ev[:, 2].astype(int)]])
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
