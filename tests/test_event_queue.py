@@ -27,8 +27,12 @@ SCENES = {
 }
 
 #: The parts' test also takes the steps cut short in float32 (the window's saved states, put back
-#: at a cut, are in the working precision: `event._save_first`, `event.restore_saved`).
-PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32")})
+#: at a cut, are in the working precision: `event._save_first`, `event.restore_saved`), and
+#: speeds from 0 up, where the split's reaches (`event._reach_of`) differ most from circle to
+#: circle: a slow circle by a border reaches far only when a fast one can hit it first.
+PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32"),
+                               "walls-f32-slow-fast": dict(SCENES["walls-f32-equal"], speed=(0.0, 1.0),
+                                                           mass="radius")})
 
 
 def on_threads(monkeypatch):
@@ -118,8 +122,9 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-radius", 4),
-                                         ("periodic-f64-area", 4), ("walls-f32-equal", 10**9)],
-                         ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "no-split"])
+                                         ("periodic-f64-area", 4), ("walls-f32-slow-fast", 4),
+                                         ("walls-f32-equal", 10**9)],
+                         ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "no-split"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     """Circles split into parts of about 200 (event.split_parts), each part's
     events run from its own queue, the parts shared among the threads (event.queue_parts):
