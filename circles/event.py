@@ -1130,11 +1130,12 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # of their reaches of each other. The nearest circle is looked for in the 3 x 3 cells: the
 # cells are at least 2 rmax + 2 vlim h wide (h the step), and no circle has moved more than
 # vlim t0 since they were built, so a circle beyond them is at a gap of at least
-# 2 vlim (h - t0) >= 2 vlim W, for which f is W anyway. Call such circles linked. In the bench scene at 1e6 the reaches are about half vlim W on average, and the
-# clusters across the borders of a split hold 4.5 times fewer circles than with 2 vlim W for
-# every pair (22000 to 27000 circles against 83000 to 130000 at each split, windows of half a
-# step). A set of circles closed under links (a cluster and its like) evolves
-# through the window on its own: no event outside it touches its circles or changes a time
+# 2 vlim (h - t0) >= 2 vlim W, for which f is W anyway. Call such circles linked. In the
+# bench scene at 1e6 the reaches are about half vlim W on average, and the clusters across
+# the borders of a split hold 4.5 times fewer circles than with 2 vlim W for every pair
+# (22000 to 27000 circles against 83000 to 130000 at each split, windows of half a step). A
+# set of circles closed under links (a cluster and its like) evolves through the window on
+# its own: no event outside it touches its circles or changes a time
 # of impact that comes due in the window. `split_parts` cuts the box into strips of rows of
 # cells and gives each strip's circles a part, except that every cluster that crosses the
 # border between two strips goes whole to the lower one (in a periodic box the border
@@ -1178,16 +1179,15 @@ def _place_at(x, t, pos: ti.template(), vel: ti.template(), tau: ti.template()):
 
 
 @ti.func
-def _reach_of(i, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
+def _reach_of(i, xi, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
               links: ti.template(), periodic: ti.template()):
-    """How far circle i can travel in the window from t (float64, see above; with the 1%
-    allowance). links: (window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-    segs); the value is computed at its first use in a split and kept in reach[i], rounded up
-    to reach's precision (below 0: not computed yet)."""
-    window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs = ti.static(links)
+    """How far circle i, at xi at time t, can travel in the window from t (float64, see above;
+    with the 1% allowance). links: (window, vlim, reach, cell_of, cell_start, sorted_ids, ncx,
+    ncy, rows, segs, allowance); the value is computed at its first use in a split and kept in
+    reach[i], rounded up to reach's precision (below 0: not computed yet)."""
+    window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, unused = ti.static(links)
     d_i = ti.cast(reach[i], ti.f64)
     if d_i < 0:
-        xi = _place_at(i, t, pos, vel, tau)
         ri = ti.cast(radius[i], ti.f64)
         # Beyond i's 3 x 3 cells a circle is too far to meet i in the window: the gap to it is
         # at least 2 vlim window, and `free` below comes out as the window.
@@ -1198,9 +1198,7 @@ def _reach_of(i, t, box, pos: ti.template(), vel: ti.template(), tau: ti.templat
             for k in range(k_lo, k_hi):
                 j = sorted_ids[k]
                 if j != i:
-                    d = _place_at(j, t, pos, vel, tau) - xi
-                    if ti.static(periodic):
-                        d -= box * ti.round(d / box)
+                    d = displacement(xi, _place_at(j, t, pos, vel, tau), box, periodic)
                     gap = ti.min(gap, d.norm() - ri - ti.cast(radius[j], ti.f64))
         speed = ti.cast(vel[i], ti.f64).norm()
         # No pair event of i before t + free: a neighbour closes in at vlim at most.
@@ -1221,16 +1219,25 @@ def _linked(xp, rx, j, t, box, pos: ti.template(), vel: ti.template(), tau: ti.t
     vlim times the window (1.01 with the allowance, the rounding up of the store and a speed
     over vlim by round-off inside): that is tested first, and most pairs fail it, so their
     second circle's reach is not computed."""
-    d = _place_at(j, t, pos, vel, tau) - xp
-    if ti.static(periodic):
-        d -= box * ti.round(d / box)
+    xj = _place_at(j, t, pos, vel, tau)
+    d = displacement(xp, xj, box, periodic)
     d2 = d.dot(d)
     q = rx + ti.cast(radius[j], ti.f64)
     linked = False
     if d2 < (q + 1.02 * links[1] * links[0]) ** 2:
-        q += _reach_of(j, t, box, pos, vel, tau, radius, links, periodic)
+        q += _reach_of(j, xj, t, box, pos, vel, tau, radius, links, periodic)
         linked = d2 < q * q
     return linked
+
+
+@ti.func
+def _link_origin(x, t, box, pos: ti.template(), vel: ti.template(), tau: ti.template(), radius: ti.template(),
+                 links: ti.template(), periodic: ti.template()):
+    """(xp, rx): circle x's place at time t, and its radius, reach and the split's allowance
+    (links[10]), for `_linked` to test its neighbours against."""
+    xp = _place_at(x, t, pos, vel, tau)
+    rx = ti.cast(radius[x], ti.f64) + _reach_of(x, xp, t, box, pos, vel, tau, radius, links, periodic) + links[10]
+    return xp, rx
 
 
 @ti.func
@@ -1270,7 +1277,7 @@ def _strip_of(c, ncx, rows_per, parts, periodic: ti.template()):
 def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template(), tau: ti.template(),
                    radius: ti.template(), label: ti.template(), claimed: ti.template(), cell_of: ti.template(),
                    cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, links: ti.template(),
-                   allowance, periodic: ti.template()):
+                   periodic: ti.template()):
     """Claim for border b the cluster of circle i (in slot s): every circle linked to a claimed
     one, breadth first, each labelled -1 - b with an atomic minimum and its slot listed in
     claimed[lo:hi]. Returns the end of the list, or -1 when it runs out of room or meets a
@@ -1285,8 +1292,7 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
     while 0 <= m and m < top:
         x = sorted_ids[claimed[m]]
         m += 1
-        xp = _place_at(x, t, pos, vel, tau)
-        rx = ti.cast(radius[x], ti.f64) + _reach_of(x, t, box, pos, vel, tau, radius, links, periodic) + allowance
+        xp, rx = _link_origin(x, t, box, pos, vel, tau, radius, links, periodic)
         for r in range(rows * segs):
             row, seg = run_parts(r, segs, periodic)
             k_lo, k_hi = neighbour_range(cell_of[x], row, seg, cell_start, ncx, ncy, periodic)
@@ -1336,7 +1342,8 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
             box = ti.Vector([box_w, box_h], dt=ti.f64)
-            links = ti.static((window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs))
+            links = ti.static((window, vlim, reach, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
+                               allowance))
             while True:
                 b = ti.atomic_add(info[taken], 1)
                 if b >= borders:
@@ -1350,9 +1357,7 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                         break
                     i = sorted_ids[s]
                     if label[i] >= 0:  # else claimed with its cluster already
-                        xp = _place_at(i, t, pos, vel, tau)
-                        rx = (ti.cast(radius[i], ti.f64) + _reach_of(i, t, box, pos, vel, tau, radius, links, periodic)
-                              + allowance)
+                        xp, rx = _link_origin(i, t, box, pos, vel, tau, radius, links, periodic)
                         crosses = False
                         for seg in range(segs):
                             a_lo, a_hi = neighbour_range(cell_of[i], 2, seg, cell_start, ncx, ncy, periodic)
@@ -1364,7 +1369,7 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                         if crosses:
                             top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, radius,
                                                  label, claimed, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-                                                 segs, links, allowance, periodic)
+                                                 segs, links, periodic)
                 if top < 0:
                     info[ok] = 0
                     top = b * share
