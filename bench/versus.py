@@ -118,8 +118,8 @@ def run_paired(base_tree, n, scheme, steps, arch, warm):
     if not (pkg_dir / "circles_base").is_dir():
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, str(pkg_dir),
-                          str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
+    out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch,
+                          str(pkg_dir), str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
