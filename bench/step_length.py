@@ -58,17 +58,13 @@ def main():
     circles.init(arch=args.arch)
     base = bench_scene(args.n, args.scheme)
     default = circles.Simulation(base)
-    sims = {1.0: default}
-    for f in factors:
-        if f != 1.0:
-            sims[f] = circles.Simulation(dataclasses.replace(base, dt=default.dt * f))
-    sims = {f: sims[f] for f in factors}
+    sims = {f: default if f == 1.0 else circles.Simulation(dataclasses.replace(base, dt=default.dt * f))
+            for f in factors}
     for sim in sims.values():
         sim.advance(args.warm)
     steps = {f: max(1, round(args.span / sim.dt)) for f, sim in sims.items()}
     start = {f: sim.stats() for f, sim in sims.items()}
-    cost = {f: [] for f in factors}  # wall seconds per unit of simulated time, each round
-    wall = {f: 0.0 for f in factors}
+    walls = {f: [] for f in factors}  # wall seconds of each round
     for k in range(args.rounds):
         for f in (factors if k % 2 == 0 else factors[::-1]):
             sim = sims[f]
@@ -76,10 +72,10 @@ def main():
             t0 = time.perf_counter()
             sim.step(steps[f])
             ti.sync()
-            w = time.perf_counter() - t0
-            wall[f] += w
-            cost[f].append(w / (steps[f] * sim.dt))
-    c = {f: np.array(v) for f, v in cost.items()}
+            walls[f].append(time.perf_counter() - t0)
+    # Wall seconds per unit of simulated time, each round, and all the rounds' wall seconds.
+    cost = {f: np.array(walls[f]) / (steps[f] * sims[f].dt) for f in factors}
+    wall = {f: sum(walls[f]) for f in factors}
     print(f"{args.scheme}, N = {args.n}, after {args.warm:g} of simulated time, {args.rounds} rounds of about "
           f"{args.span:g} each, on the {args.arch}; default dt {default.dt:.4g}:")
     print("| dt / default | dt | collisions per circle-step | circle-steps/s | collisions/s | pair collisions per "
@@ -91,7 +87,7 @@ def main():
         pairs = end["pair_collisions"] - start[f]["pair_collisions"]
         span = args.rounds * steps[f] * sim.dt
         circle_steps = args.n * args.rounds * steps[f]
-        rel = c[f] / c[1.0]
+        rel = cost[f] / cost[1.0]
         energy = end["kinetic_energy"] / start[f]["kinetic_energy"] - 1
         print(f"| {f:g} | {sim.dt:.4g} | {pairs / circle_steps:.3g} | {circle_steps / wall[f] / 1e6:.3g} M | "
               f"{pairs / wall[f] / 1e6:.3g} M | {pairs / span:.4g} | {np.median(rel):.3f} "
