@@ -14,8 +14,8 @@ that only writes the cell.
 Taichi's generated loop reads each array's data pointer from the kernel's argument buffer
 at every access; after a store, which might alias that buffer, it reads it again, and a
 loop that takes one item per iteration runs far below the memory's speed. A loop with no
-store keeps the pointers in registers (the read-only row). See circles/loops.py and the
-README's known limits.
+store keeps the pointers in registers (the read-only row). See circles/loops.py and
+bench/PERFORMANCE.md (the discrete scheme on a CPU).
 """
 import argparse
 import time
