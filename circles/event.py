@@ -81,6 +81,19 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
                            horizon, real, periodic)
 
 
+class _StepStart:
+    """In place of the clocks `tau` at a step's start, where every circle's clock is 0: a time
+    of impact then reads no clock, and its places at the pair's start time are the positions
+    themselves (x + v * 0 is x), so it is the same number."""
+
+    def __getitem__(self, i):
+        return 0.0
+
+
+#: The clocks at a step's start (`_StepStart`), for the first predictions.
+STEP_START = _StepStart()
+
+
 @ti.func
 def own_values(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template()):
     """(tau, x, v, r) of circle i: what its pair times read of it (`pair_time`)."""
@@ -1049,31 +1062,17 @@ def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.t
             b[3 + k][x] = sums[k][x]
 
 
-@launch.kernel
-def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
-               ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
-               prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
-               virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
-               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-               t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
-               coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
-               r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
-               two_level: ti.template(), serial: ti.template()) -> ti.f64:
-    """A whole step from one queue (see above), every circle moved to its end at the last
-    (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
-    collision that would outrun the grid, where the step ends (see the module's docstring);
-    -1 when the earliest event is not its partner's (an internal error); -2 when the step
-    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
-
-    `two_level`: the grid's cells are sized for the small circles and the large ones are also
-    listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
-    large, and `margin` is the most two circles can close in on each other in the step. With
-    `serial`, the first predictions too run on one thread (see backend.serial_loops), each pair's
-    time computed once (`_first_events_once`, one grid level)."""
+@ti.func
+def _first_predictions(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                       ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), stamp: ti.template(),
+                       cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
+                       segs, box_w, box_h, horizon, coarse_start: ti.template(), coarse_ids: ti.template(), ncx_c,
+                       ncy_c, mx, my, r_cut, margin, real: ti.template(), periodic: ti.template(),
+                       two_level: ti.template(), serial: ti.template()):
+    """Every circle's earliest event of the step (`queue_step`), from the clocks `tau` (or
+    `STEP_START`): on one thread each pair computed once (`_first_events_once`, one grid level),
+    else each circle's search in full."""
     n = pos.shape[0]
-    horizon = ti.cast(t_end, real)
-    vlim2 = ti.cast(vlim, real) ** 2
-    reached = t_end
     if ti.static(serial and not two_level):
         _first_events_once(pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
                            segs, box_w, box_h, horizon, real, periodic)
@@ -1087,6 +1086,42 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                                   margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
             ev_t[i] = t_i
             ev_p[i] = p_i
+
+
+@launch.kernel
+def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
+               ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
+               prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
+               virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
+               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
+               t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
+               coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
+               r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
+               two_level: ti.template(), serial: ti.template(), at_start: ti.template()) -> ti.f64:
+    """A whole step from one queue (see above), every circle moved to its end at the last
+    (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
+    collision that would outrun the grid, where the step ends (see the module's docstring);
+    -1 when the earliest event is not its partner's (an internal error); -2 when the step
+    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
+
+    `two_level`: the grid's cells are sized for the small circles and the large ones are also
+    listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
+    large, and `margin` is the most two circles can close in on each other in the step. With
+    `serial`, the first predictions too run on one thread (see backend.serial_loops), each pair's
+    time computed once (`_first_events_once`, one grid level). `at_start`: every circle's clock
+    is 0, as at a step's start, and the first predictions read none (`STEP_START`)."""
+    n = pos.shape[0]
+    horizon = ti.cast(t_end, real)
+    vlim2 = ti.cast(vlim, real) ** 2
+    reached = t_end
+    if ti.static(at_start):
+        _first_predictions(pos, vel, radius, STEP_START, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx,
+                           ncy, rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
+                           r_cut, margin, real, periodic, two_level, serial)
+    else:
+        _first_predictions(pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
+                           rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
+                           margin, real, periodic, two_level, serial)
     # Buckets: one per QUEUE_BUCKET_CIRCLES circles, and at most n, so that the loop below resets
     # every one (the parts' calendars, which share the array, take more of it).
     nb = ti.min(head.shape[0], ti.max(n // QUEUE_BUCKET_CIRCLES, 1))
@@ -1500,16 +1535,16 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            _first_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real,
+                            _first_wall_event(i, pos, vel, radius, STEP_START, ids, ev_t, ev_p, box, horizon, real,
                                               periodic)
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
                             pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, rows, segs,
-                                       periodic, _pair_in_part, (pos, vel, radius, tau, ids, ev_t, ev_p, box,
-                                                                 horizon, real, periodic,
-                                                                 own_values(i, pos, vel, radius, tau), label, k,
-                                                                 touched, dirty))
+                                       periodic, _pair_in_part, (pos, vel, radius, STEP_START, ids, ev_t, ev_p,
+                                                                 box, horizon, real, periodic,
+                                                                 own_values(i, pos, vel, radius, STEP_START), label,
+                                                                 k, touched, dirty))
                 size = 0
                 for q in range(s_lo, items):
                     s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)

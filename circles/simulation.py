@@ -630,8 +630,9 @@ class Simulation:
                 return self._queue_parts_step(h, vlim)
         return self._queue_step_whole(h, vlim)
 
-    def _queue_step_whole(self, h, vlim):
-        """`_queue_step` from one queue for all circles (`event.queue_step`)."""
+    def _queue_step_whole(self, h, vlim, at_start=True):
+        """`_queue_step` from one queue for all circles (`event.queue_step`); `at_start`: at the
+        step's start (every circle's clock 0), not after some of its windows."""
         w, hgt = self.box
         real, periodic, record = self._real, self.periodic, self._record_cap > 0
         g = self.grid.args()
@@ -644,7 +645,7 @@ class Simulation:
                                    self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
-                                   self._log_j, *levels, real, periodic, record, two, self._serial)
+                                   self._log_j, *levels, real, periodic, record, two, self._serial, at_start)
         self.rounds += 1
         if reached == -2:
             raise self._jammed()
@@ -697,7 +698,7 @@ class Simulation:
                     break
                 if self._windows >= MOST_WINDOWS:
                     self._split_wait = SPLIT_RETRY_STEPS
-                    return self._queue_step_whole(h, vlim)  # from the circles' clocks, as they are
+                    return self._queue_step_whole(h, vlim, done == 0)  # from the circles' clocks, as they are
                 self._windows *= 2
                 done *= 2
             log_count = int(self._counters.to_numpy()[1]) if record else 0

@@ -60,7 +60,9 @@ def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypa
 
 def assert_same_as_rounds(rounds, sim, keys=("pair_collisions",)):
     """The queue's run `sim` the same as the rounds' bit for bit: positions, velocities, the
-    stats `keys` and the event log, after more than 1000 pair collisions."""
+    stats `keys` and the event log, after more than 1000 pair collisions. And every circle's
+    clock is 0 between steps, as a step's first predictions take it (`event.STEP_START`)."""
+    assert not np.any(sim.tau.to_numpy())
     a, b = rounds.state(), sim.state()
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     sa, sb = rounds.stats(), sim.stats()
