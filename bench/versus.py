@@ -2,6 +2,7 @@
 
     python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
                            [--arch cpu|gpu] [--steps K] [--warm W] [--scene bench|spread] [--interleave]
+                           [--batch B]
 
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
@@ -19,7 +20,10 @@ imported as `circles_base`) and steps them in turn, one step each, the first of 
 alternating: the machine's load, which on a shared machine changes by tens of percent within
 minutes, then falls on both within a fraction of a second. The ratio column is then the median
 over the pairs of steps of base step time / this step time, with the quartiles, and the speeds
-are the medians of each engine's steps.
+are the medians of each engine's steps. `--batch B` (with `--interleave`) times calls of
+`step(B)` in turn instead of single steps, each reported per step: bench.py's throughput rows
+call `step(k)` with k in the tens to thousands, and a call's end checks the state once, which
+single steps pay every step.
 """
 import argparse
 import json
@@ -77,13 +81,14 @@ for name, pkg in (("base", circles_base), ("this", circles)):
     sims[name].step(int(sys.argv[7]))  # compiles every kernel of a step, the reorder of every 16th step included
 start = {k: s.stats() for k, s in sims.items()}
 times = {"base": [], "this": []}
+batch = int(sys.argv[8])
 for k in range(steps):
     for name in (("base", "this") if k % 2 == 0 else ("this", "base")):
         ti.sync()
         t0 = time.perf_counter()
-        sims[name].step(1)
+        sims[name].step(batch)
         ti.sync()
-        times[name].append(time.perf_counter() - t0)
+        times[name].append((time.perf_counter() - t0) / batch)
 out = {}
 for name, sim in sims.items():
     end = sim.stats()
@@ -112,14 +117,14 @@ def run(tree, n, scheme, steps, arch, scene, warm):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run_paired(base_tree, n, scheme, steps, arch, warm):
+def run_paired(base_tree, n, scheme, steps, arch, warm, batch=1):
     """Both engines in one process (`PAIRED`): the base tree's package copied as `circles_base`."""
     pkg_dir = Path(base_tree) / "paired"
     if not (pkg_dir / "circles_base").is_dir():
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     out = subprocess.run([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch,
-                          str(pkg_dir), str(warm)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
+                          str(pkg_dir), str(warm), str(batch)], capture_output=True, text=True, env=env, cwd=str(ROOT), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -132,13 +137,20 @@ def main():
     parser.add_argument("--rounds", type=int, default=3, help="processes per engine and row, alternating")
     parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
     parser.add_argument("--steps", type=int, default=0,
-                        help="timed steps per process (default: 2e7 / N discrete, 2e6 / N event, 3 to 20)")
+                        help="timed steps (calls of step(B) with --batch) per process (default: 2e7 / N discrete, "
+                             "2e6 / N event, 3 to 20)")
     parser.add_argument("--warm", type=int, default=16, help="warm-up steps before the timed ones (at least 16)")
     parser.add_argument("--scene", choices=("bench", "spread"), default="bench",
                         help="spread: bench.py's radius-spread mixture (1%% of the circles 50 times larger)")
     parser.add_argument("--interleave", action="store_true",
                         help="both engines in one process, stepped in turn (see above); the bench scene only")
+    parser.add_argument("--batch", type=int, default=1,
+                        help="with --interleave: steps per timed call (step(B)), reported per step")
     args = parser.parse_args()
+    if args.batch < 1:
+        parser.error(f"--batch {args.batch}: give 1 or more steps per timed call")
+    if args.batch > 1 and not args.interleave:
+        parser.error(f"--batch {args.batch} needs --interleave: leave out --batch or add --interleave")
     if args.warm < 16:
         parser.error(f"--warm {args.warm} is below 16: the timed steps would include the first reorder's "
                      "compilation; give 16 or more")
@@ -146,6 +158,8 @@ def main():
         parser.error(f"--interleave runs the bench scene only, not --scene {args.scene}: leave out one of the two")
     what = "radius-spread mixture, " if args.scene == "spread" else ""
     how = (", stepped in turn in one process" if args.interleave else "") + f", {args.warm} warm-up steps"
+    if args.batch > 1:
+        how += f", timed in calls of step({args.batch})"
     print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}{how}; {what}area fraction "
           "0.3, walls, f32, default dt\n")
     ratio = "ratio, paired steps [q25, q75]" if args.interleave else "ratio"
@@ -165,7 +179,7 @@ def main():
                 if args.interleave:
                     pair_ratios = []
                     for r in range(args.rounds):
-                        result = run_paired(tmp, n, scheme, steps, args.arch, args.warm)
+                        result = run_paired(tmp, n, scheme, steps, args.arch, args.warm, args.batch)
                         for name in speeds:
                             speeds[name] += [n / t for t in result[name]["times"]]
                             last[name] = result[name]

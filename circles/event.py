@@ -47,6 +47,7 @@ import taichi as ti
 from . import launch
 from .discrete import NLARGE
 from .grid import PART_ITERATIONS, count_parts
+from .reductions import speed_of
 from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
                        pairs_once, run_parts, wide_row)
 
@@ -1094,7 +1095,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr,
                virial: ndarr, wall_impulse: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-               t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr,
+               t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, speed_out: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
                r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
                two_level: ti.template(), serial: ti.template(), at_start: ti.template()) -> ti.f64:
@@ -1102,7 +1103,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
     -1 when the earliest event is not its partner's (an internal error); -2 when the step
-    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles).
+    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles). The finish
+    leaves the largest speed of the state in speed_out (`finished_speed` reads it).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -1149,8 +1151,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                   (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
                                   margin, t_offset, box, vlim2, real, periodic, record, two_level, (), (), 0)
-    # A top-level loop (one inside a branch would run on one thread).
-    _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial)
+    # A top-level loop (one inside a branch would run on one thread); the largest speed of the
+    # state it leaves in speed_out (`_finish`), for the next step.
+    _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True)
     return reached
 
 
@@ -1566,20 +1569,44 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 result[k] = reached
 
 @launch.kernel
-def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64,
-           real: ti.template(), periodic: ti.template(), serial: ti.template()):
-    """Every circle moved to the step's end (from its own time tau); with `serial`, on one thread."""
-    _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial)
+def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64, speed_out: ndarr,
+           real: ti.template(), periodic: ti.template(), serial: ti.template(), speed: ti.template()) -> ti.f64:
+    """Every circle moved to the step's end (from its own time tau); with `serial`, on one thread.
+    With `speed`, also the largest speed of the state it leaves, as `reductions.max_speed`
+    measures it (returned squared; see `_finish`), else 0."""
+    _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial, speed_out, speed)
+    result = ti.cast(0.0, ti.f64)  # a bare 0.0 would make it float32
+    if ti.static(speed):
+        result = finished_speed(speed_out)
+    return result
+
+
+@ti.func
+def finished_speed(speed_out: ti.template()) -> ti.f64:
+    """What `_finish` with `speed` found: the largest |v|^2 in float64, or minus the number of
+    circles with a non-finite position or velocity (the square root of a largest |v|^2 is the
+    largest |v|, bit for bit: a correctly rounded square root is monotonic)."""
+    result = speed_out[0]
+    if speed_out[1] > 0:
+        result = -speed_out[1]
+    return result
 
 
 @ti.func
 def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon, box_w, box_h, real: ti.template(),
-            periodic: ti.template(), serial: ti.template()):
-    """`finish` to the step's end `horizon` (of type real), as a loop of the calling kernel."""
+            periodic: ti.template(), serial: ti.template(), speed_out: ti.template(), speed: ti.template()):
+    """`finish` to the step's end `horizon` (of type real), as a loop of the calling kernel.
+    With `speed`, the largest |v|^2 (float64) goes to speed_out[0] and the count of circles whose
+    new position or velocity is not finite to speed_out[1], so that the next step needs no pass
+    of `reductions.max_speed`: the same values it reads, from registers."""
+    if ti.static(speed):
+        speed_out[0] = 0.0
+        speed_out[1] = 0.0
     ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         box = ti.Vector([box_w, box_h], dt=real)
-        x = pos[i] + vel[i] * (horizon - tau[i])
+        v = vel[i]
+        x = pos[i] + v * (horizon - tau[i])
         if ti.static(periodic):
             x -= box * ti.floor(x / box)
             # x / box can round up to exactly 1 for x a hair below 0.
@@ -1588,3 +1615,10 @@ def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon,
                     x[a] -= box[a]
         pos[i] = x
         tau[i] = 0.0
+        if ti.static(speed):
+            s, bad = speed_of(x, v)
+            if bad > 0:
+                ti.atomic_add(speed_out[1], 1.0)
+            elif s > speed_out[0]:
+                # Reading first leaves only the few new maxima to the (contended) atomic.
+                ti.atomic_max(speed_out[0], s)

@@ -1,4 +1,6 @@
 """Whole-array kernels: largest speed with a finiteness check, largest overlap, copies."""
+import math
+
 import taichi as ti
 
 from . import launch
@@ -15,16 +17,31 @@ STRIDED_THREADS = 1 << 16
 
 
 @ti.func
-def _speed(pos: ti.template(), vel: ti.template(), i):
-    """(|v_i| in float64, 1.0 when circle i's position or velocity is not finite else 0.0)."""
-    p = ti.cast(pos[i], ti.f64)
-    v = ti.cast(vel[i], ti.f64)
+def speed_of(p, v):
+    """(|v|^2 in float64, 1.0 when the position p or the velocity v is not finite else 0.0)."""
+    p64 = ti.cast(p, ti.f64)
+    v64 = ti.cast(v, ti.f64)
     bad = 0.0
     for a in ti.static(range(2)):
         # x - x is 0 for finite x and NaN for NaN or +-Inf.
-        if not (p[a] - p[a] == 0.0) or not (v[a] - v[a] == 0.0):
+        if not (p64[a] - p64[a] == 0.0) or not (v64[a] - v64[a] == 0.0):
             bad = 1.0
-    return v.norm(), bad
+    return v64.norm_sqr(), bad
+
+
+def speed_from(result: float) -> float:
+    """The largest |v| from a kernel's result of the largest |v|^2 (`speed_of`), or that result
+    when negative (minus the number of circles that are not finite). A correctly rounded square
+    root is monotonic, so the root of the largest square is the largest |v|, bit for bit."""
+    return math.sqrt(result) if result >= 0 else result
+
+
+def speed_in(out):
+    """`speed_from` of what a largest-speed pass left in its `out` array (a numpy view of it,
+    `launch.host_view`; None, as where there is no view, gives None): as its kernel's result."""
+    if out is None:
+        return None
+    return speed_from(-float(out[1]) if out[1] > 0 else float(out[0]))
 
 
 def max_speed(pos, vel, out, serial=False) -> float:
@@ -32,17 +49,19 @@ def max_speed(pos, vel, out, serial=False) -> float:
 
     `out`: a float64 ndarray of 2 elements. One launch, whose kernel returns the value (a
     separate read-back would cost a second launch). `serial`: on one thread, on a CPU (see
-    backend.serial_loops).
+    backend.serial_loops). An event step's finish on a CPU measures the same in its own pass
+    (`event.finish`), and the simulation keeps that value for the next step.
     """
     if current_arch() == "gpu":
-        return _max_speed(pos, vel, out, STRIDED_THREADS)
-    return _max_speed(pos, vel, out, -1 if serial else 0)
+        return speed_from(_max_speed(pos, vel, out, STRIDED_THREADS))
+    return speed_from(_max_speed(pos, vel, out, -1 if serial else 0))
 
 
 @launch.kernel
 def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti.f64:
-    """`max_speed` as one loop over the circles (threads = 0; -1: on one thread), or as
-    `threads` threads that each take every threads-th circle."""
+    """`max_speed`'s largest |v|^2 (or minus the count of circles not finite) as one loop over
+    the circles (threads = 0; -1: on one thread), or as `threads` threads that each take every
+    threads-th circle."""
     out[0] = 0.0
     out[1] = 0.0
     n = pos.shape[0]
@@ -52,7 +71,7 @@ def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti
             bad = 0.0
             i = t
             while i < n:
-                s, b = _speed(pos, vel, i)
+                s, b = speed_of(pos[i], vel[i])
                 top = ti.max(top, s)
                 bad += b
                 i += threads
@@ -63,7 +82,7 @@ def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti
     else:
         ti.loop_config(serialize=threads < 0)
         for i in range(n):
-            s, bad = _speed(pos, vel, i)
+            s, bad = speed_of(pos[i], vel[i])
             if bad > 0:
                 ti.atomic_add(out[1], 1.0)
             elif s > out[0]:

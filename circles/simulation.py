@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import discrete, event, placement, reductions
+from . import discrete, event, launch, placement, reductions
 from .backend import current_arch, ensure_init, serial_loops
 from .geometry import NEVER, spans
 from .grid import Grid, count_parts
@@ -258,6 +258,10 @@ class Simulation:
         self._upload(np.asarray(pos, dtype=np.float64), np.asarray(vel, dtype=np.float64), np.zeros(n, np.int32),
                      np.zeros(n, np.int32), np.zeros(n), np.zeros(n))
         self._speed_out = ti.ndarray(ti.f64, shape=2)
+        # The largest speed of the state as it is (as `_max_speed` returns it), when an event
+        # step's finish measured it (`event.finish`, CPU only); None: unknown, measure it.
+        self._speed_view = launch.host_view(self._speed_out)
+        self._known_speed = None
         self._overlap_out = ti.ndarray(ti.f64, shape=1)
         self._counters = ti.ndarray(ti.i32, shape=2)
         self._scalars = ti.ndarray(real, shape=2)
@@ -414,6 +418,7 @@ class Simulation:
 
     def _upload(self, pos, vel, pair_count, wall_count, virial, wall_impulse):
         """Store circles given in creation order, in cell order."""
+        self._known_speed = None
         order = self._cell_order(pos)
         self._ids_cache = order
         self._color_cache = None
@@ -515,7 +520,11 @@ class Simulation:
         return self._discrete_step(h)
 
     def _max_speed(self):
-        vmax = reductions.max_speed(self.pos, self.vel, self._speed_out, self._serial)
+        """The largest speed; raises when a circle is not finite. Measured by a pass over the
+        circles unless the last event step's finish measured it (`_known_speed`)."""
+        vmax = self._known_speed
+        if vmax is None:
+            vmax = reductions.max_speed(self.pos, self.vel, self._speed_out, self._serial)
         bad = -vmax if vmax < 0 else 0
         if bad:
             raise FloatingPointError(f"{int(bad)} circles have a non-finite position or velocity at time "
@@ -531,6 +540,7 @@ class Simulation:
     def _event_step(self, h):
         """One step of the event scheme over [0, h]; returns the simulated time covered (h, or less when cut)."""
         vmax = self._max_speed()
+        self._known_speed = None  # until the step's finish measures it again
         w, hgt = self.box
         if vmax == 0.0:
             return h
@@ -597,7 +607,7 @@ class Simulation:
             if executed == 0:
                 raise RuntimeError(f"event rounds made no progress at step time {self._scalars.to_numpy()[0]} "
                                    "(internal error)")
-        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, real, periodic, self._serial)
+        event.finish(self.pos, self.vel, self.tau, t_end, w, hgt, self._speed_out, real, periodic, self._serial, False)
         return t_end
 
     def _build_two_levels(self, margin):
@@ -645,8 +655,11 @@ class Simulation:
                                    self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
-                                   self._log_j, *levels, real, periodic, record, two, self._serial, at_start)
+                                   self._log_j, self._speed_out, *levels, real, periodic, record, two,
+                                   self._serial, at_start)
         self.rounds += 1
+        # queue_step's finish left the largest speed in _speed_out; its return synchronised.
+        self._known_speed = reductions.speed_in(self._speed_view)
         if reached == -2:
             raise self._jammed()
         if reached < 0:
@@ -745,7 +758,9 @@ class Simulation:
             t0 = t1
             done += 1
         self.rounds += 1
-        event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._real, periodic, self._serial)
+        self._known_speed = reductions.speed_from(
+            event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._speed_out, self._real, periodic, self._serial,
+                         True))
         return h
 
     def _jammed(self):
@@ -778,6 +793,7 @@ class Simulation:
             self._set_counter(1, log_count)
 
     def _discrete_step(self, h):
+        self._known_speed = None
         w, hgt = self.box
         real, periodic = self._real, self.periodic
         _, *cells = self.grid.prepare(2.0 * self._r_cut)

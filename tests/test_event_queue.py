@@ -158,6 +158,36 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("name,parts", [("walls-f32-radius", False), ("periodic-f32-dense", False),
+                                        ("walls-f32-radius", True), ("periodic-f64-area", True)],
+                         ids=["one-queue", "one-queue-periodic", "parts-cut-steps", "parts-periodic"])
+def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, name, parts):
+    """The queue's finish (`event.finish`, and `event.queue_step`'s own) also measures the
+    largest speed of the state it leaves, for the next step's grid and speed limit: it must be
+    the value of a separate pass over the circles (`reductions.max_speed`) bit for bit after
+    every step, in one queue and in parts, with steps cut short, and it is forgotten as the
+    next step starts and when the state is loaded anew."""
+    from circles import event, reductions
+
+    if parts:
+        on_threads(monkeypatch)
+        monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **PARTS_SCENES[name]))
+    if parts and not sim._parts:
+        pytest.skip("one thread: no parts")
+    assert sim._parts == parts and sim._known_speed is None
+    for _ in range(12):
+        sim.step(1)
+        measured = reductions.max_speed(sim.pos, sim.vel, sim._speed_out, sim._serial)
+        assert sim._known_speed is not None and sim._known_speed == measured > 0
+    assert (sim.parts_run >= 12) == parts
+    if name.endswith("-radius"):
+        assert sim.cut_steps > 0
+    sim._upload(*sim._download())
+    assert sim._known_speed is None
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cpu, monkeypatch):
     """400 circles at area fraction 0.75 with their loops on the threads and no room for claims:
     every split fails (clusters cross the borders), so each step runs from one queue, whose
