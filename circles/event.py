@@ -401,26 +401,31 @@ def _pair_once(i, j, a: ti.template()):
 def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
                        ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-                       horizon, real: ti.template(), periodic: ti.template()):
+                       horizon, real: ti.template(), periodic: ti.template(), fresh: ti.template()):
     """On one thread, every circle's earliest event, as `_earliest` in full would find it, with
     each pair's time of impact computed once, not once from each circle: every circle takes
     its walls, then each pair is offered to both circles from the forward half of one circle's
     cells (`geometry.pairs_once`). The minimum of the keys does not depend on the order of the
-    offers. One grid level.
+    offers. One grid level. `fresh`: every circle holds no event (as `queue_step`'s finish on
+    one thread leaves it), and takes its walls as the pairs' loop visits it
+    (`_merge_wall_event`), after the offers of the circles before it, in one pass instead of two.
 
     (On several threads the offers of two threads could meet at one circle; there each circle
     searches all its cells, `queue_step`. Threads that take bands of rows of cells, even bands
     then odd ones, need no atomics, but measured no faster on 2 cores at 1e5 and 1e6.)"""
     n = pos.shape[0]
-    ti.loop_config(serialize=True)
-    for i in range(n):
-        box = ti.Vector([box_w, box_h], dt=real)
-        _first_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
+    if ti.static(not fresh):
+        ti.loop_config(serialize=True)
+        for i in range(n):
+            box = ti.Vector([box_w, box_h], dt=real)
+            _first_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
     forward = forward_fits(ncx, ncy, periodic)
     ti.loop_config(serialize=True)
     for own in range(n):
         box = ti.Vector([box_w, box_h], dt=real)
         i = sorted_ids[own]
+        if ti.static(fresh):
+            _merge_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
         pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _pair_once,
                    (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic,
                     own_values(i, pos, vel, radius, tau)))
@@ -439,6 +444,22 @@ def _first_wall_event(i, pos: ti.template(), vel: ti.template(), radius: ti.temp
         t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t, n + 8, n + 8, p)
     ev_t[i] = t
     ev_p[i] = p
+
+
+@ti.func
+def _merge_wall_event(i, pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
+                      ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), box, horizon,
+                      real: ti.template(), periodic: ti.template()):
+    """Circle i's earliest wall hit up to the horizon taken as its event when it comes before
+    the event it holds (`_first_wall_event` where the pairs offered so far are kept: the
+    minimum of the keys does not depend on the order of the offers); none in a periodic box."""
+    if ti.static(not periodic):
+        n = pos.shape[0]
+        t0, lo0, hi0 = event_key(i, ev_t, ev_p, ids, n)
+        t, lo, hi, p = _wall_events(i, pos, vel, radius, tau, ids, box, horizon, real, t0, lo0, hi0, ev_p[i])
+        if p != ev_p[i]:
+            ev_t[i] = t
+            ev_p[i] = p
 
 
 @ti.func
@@ -1069,14 +1090,14 @@ def _first_predictions(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
                        segs, box_w, box_h, horizon, coarse_start: ti.template(), coarse_ids: ti.template(), ncx_c,
                        ncy_c, mx, my, r_cut, margin, real: ti.template(), periodic: ti.template(),
-                       two_level: ti.template(), serial: ti.template()):
+                       two_level: ti.template(), serial: ti.template(), fresh: ti.template()):
     """Every circle's earliest event of the step (`queue_step`), from the clocks `tau` (or
-    `STEP_START`): on one thread each pair computed once (`_first_events_once`, one grid level),
-    else each circle's search in full."""
+    `STEP_START`): on one thread each pair computed once (`_first_events_once`, one grid level;
+    `fresh`: see there), else each circle's search in full."""
     n = pos.shape[0]
     if ti.static(serial and not two_level):
         _first_events_once(pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-                           segs, box_w, box_h, horizon, real, periodic)
+                           segs, box_w, box_h, horizon, real, periodic, fresh)
     else:
         ti.loop_config(serialize=serial)
         for i in range(n):
@@ -1111,7 +1132,10 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     large, and `margin` is the most two circles can close in on each other in the step. With
     `serial`, the first predictions too run on one thread (see backend.serial_loops), each pair's
     time computed once (`_first_events_once`, one grid level). `at_start`: every circle's clock
-    is 0, as at a step's start, and the first predictions read none (`STEP_START`)."""
+    is 0, as at a step's start, and the first predictions read none (`STEP_START`); and, with
+    `serial`, every circle holds no event, as this kernel's finish leaves it on one thread (and
+    the set-up), so that the circles take their walls in the pairs' pass (`_first_events_once`
+    with `fresh`). A simulation whose loops run on one thread steps only here."""
     n = pos.shape[0]
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
@@ -1119,11 +1143,11 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     if ti.static(at_start):
         _first_predictions(pos, vel, radius, STEP_START, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx,
                            ncy, rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
-                           r_cut, margin, real, periodic, two_level, serial)
+                           r_cut, margin, real, periodic, two_level, serial, True)
     else:
         _first_predictions(pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
                            rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                           margin, real, periodic, two_level, serial)
+                           margin, real, periodic, two_level, serial, False)
     # Buckets: one per QUEUE_BUCKET_CIRCLES circles, and at most n, so that the loop below resets
     # every one (the parts' calendars, which share the array, take more of it).
     nb = ti.min(head.shape[0], ti.max(n // QUEUE_BUCKET_CIRCLES, 1))
@@ -1152,8 +1176,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
                                   margin, t_offset, box, vlim2, real, periodic, record, two_level, (), (), 0)
     # A top-level loop (one inside a branch would run on one thread); the largest speed of the
-    # state it leaves in speed_out (`_finish`), for the next step.
-    _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True)
+    # state it leaves in speed_out, and on one thread no event held (`_finish`), for the next step.
+    _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True,
+            (ev_t, ev_p) if ti.static(serial) else ())
     return reached
 
 
@@ -1574,7 +1599,7 @@ def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box
     """Every circle moved to the step's end (from its own time tau); with `serial`, on one thread.
     With `speed`, also the largest speed of the state it leaves, as `reductions.max_speed`
     measures it (returned squared; see `_finish`), else 0."""
-    _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial, speed_out, speed)
+    _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial, speed_out, speed, ())
     result = ti.cast(0.0, ti.f64)  # a bare 0.0 would make it float32
     if ti.static(speed):
         result = finished_speed(speed_out)
@@ -1594,11 +1619,14 @@ def finished_speed(speed_out: ti.template()) -> ti.f64:
 
 @ti.func
 def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon, box_w, box_h, real: ti.template(),
-            periodic: ti.template(), serial: ti.template(), speed_out: ti.template(), speed: ti.template()):
+            periodic: ti.template(), serial: ti.template(), speed_out: ti.template(), speed: ti.template(),
+            clear: ti.template()):
     """`finish` to the step's end `horizon` (of type real), as a loop of the calling kernel.
     With `speed`, the largest |v|^2 (float64) goes to speed_out[0] and the count of circles whose
     new position or velocity is not finite to speed_out[1], so that the next step needs no pass
-    of `reductions.max_speed`: the same values it reads, from registers."""
+    of `reductions.max_speed` (the same values it reads, from registers). `clear`: () or the
+    events (ev_t, ev_p), each circle's then cleared (NEVER, NO_EVENT), as one queue's next first
+    predictions on one thread take them (`_first_events_once` with `fresh`)."""
     if ti.static(speed):
         speed_out[0] = 0.0
         speed_out[1] = 0.0
@@ -1615,6 +1643,9 @@ def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon,
                     x[a] -= box[a]
         pos[i] = x
         tau[i] = 0.0
+        if ti.static(len(clear) > 0):
+            clear[0][i] = ti.cast(NEVER, real)  # as `_first_wall_event` and the set-up write it
+            clear[1][i] = NO_EVENT
         if ti.static(speed):
             s, bad = speed_of(x, v)
             if bad > 0:

@@ -16,7 +16,7 @@ import taichi as ti
 
 from . import discrete, event, launch, placement, reductions
 from .backend import current_arch, ensure_init, serial_loops
-from .geometry import NEVER, spans
+from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
                     check_box, check_dt, check_fits)
@@ -383,8 +383,13 @@ class Simulation:
         n, real = self.n, self._real
         self.tau = ti.ndarray(real, shape=n)
         reductions.fill_real(self.tau, 0.0)
+        # Each circle's event (time, partner). One queue on one thread starts a step with none
+        # held (its finish clears them, `event.queue_step`), as here.
         self._ev_t = ti.ndarray(real, shape=n)
         self._ev_p = ti.ndarray(ti.i32, shape=n)
+        # NEVER as the kernels write it (`ti.cast(NEVER, real)` of a literal, which is float32).
+        reductions.fill_real(self._ev_t, float(np.float32(NEVER)))
+        reductions.fill_i32(self._ev_p, NO_EVENT)
         self._dirty = ti.ndarray(ti.i32, shape=n)
         self._moved = ti.ndarray(ti.i32, shape=n)
         self._d1 = ti.ndarray(real, shape=n)

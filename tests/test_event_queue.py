@@ -61,8 +61,13 @@ def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypa
 def assert_same_as_rounds(rounds, sim, keys=("pair_collisions",)):
     """The queue's run `sim` the same as the rounds' bit for bit: positions, velocities, the
     stats `keys` and the event log, after more than 1000 pair collisions. And every circle's
-    clock is 0 between steps, as a step's first predictions take it (`event.STEP_START`)."""
+    clock is 0 between steps, as a step's first predictions take it (`event.STEP_START`), and
+    on one thread it holds no event (the walls are offered in the pairs' pass,
+    `event._first_events_once`)."""
+    from circles.geometry import NO_EVENT
     assert not np.any(sim.tau.to_numpy())
+    if sim._serial:
+        assert np.all(sim._ev_p.to_numpy() == NO_EVENT)
     a, b = rounds.state(), sim.state()
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     sa, sb = rounds.stats(), sim.stats()
@@ -166,8 +171,11 @@ def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, na
     largest speed of the state it leaves, for the next step's grid and speed limit: it must be
     the value of a separate pass over the circles (`reductions.max_speed`) bit for bit after
     every step, in one queue and in parts, with steps cut short, and it is forgotten as the
-    next step starts and when the state is loaded anew."""
+    next step starts and when the state is loaded anew. One queue on one thread also leaves no
+    event held (`event.queue_step`: its next first predictions take the walls in the pairs'
+    pass)."""
     from circles import event, reductions
+    from circles.geometry import NEVER, NO_EVENT
 
     if parts:
         on_threads(monkeypatch)
@@ -180,6 +188,11 @@ def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, na
         sim.step(1)
         measured = reductions.max_speed(sim.pos, sim.vel, sim._speed_out, sim._serial)
         assert sim._known_speed is not None and sim._known_speed == measured > 0
+        if not parts:
+            # One queue on one thread also clears every event for its next first predictions,
+            # NEVER as every kernel writes it (a float32 literal in the working precision).
+            assert np.all(sim._ev_p.to_numpy() == NO_EVENT)
+            assert np.all(sim._ev_t.to_numpy() == sim._np_real(np.float32(NEVER)))
     assert (sim.parts_run >= 12) == parts
     if name.endswith("-radius"):
         assert sim.cut_steps > 0
