@@ -47,7 +47,7 @@ import taichi as ti
 from . import launch
 from .discrete import NLARGE
 from .grid import PART_ITERATIONS, count_parts
-from .reductions import speed_of
+from .reductions import offer_speed, speed_of, speed_result
 from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
                        pairs_once, run_parts, wide_row)
 
@@ -1125,7 +1125,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     collision that would outrun the grid, where the step ends (see the module's docstring);
     -1 when the earliest event is not its partner's (an internal error); -2 when the step
     executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles). The finish
-    leaves the largest speed of the state in speed_out (`finished_speed` reads it).
+    leaves the largest speed of the state in speed_out (as `reductions.speed_result` reads it).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
     listed in coarse cells (`build_coarse`, `_runs`); circles with radius above r_cut are
@@ -1602,18 +1602,7 @@ def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box
     _finish(pos, vel, tau, ti.cast(t_end, real), box_w, box_h, real, periodic, serial, speed_out, speed, ())
     result = ti.cast(0.0, ti.f64)  # a bare 0.0 would make it float32
     if ti.static(speed):
-        result = finished_speed(speed_out)
-    return result
-
-
-@ti.func
-def finished_speed(speed_out: ti.template()) -> ti.f64:
-    """What `_finish` with `speed` found: the largest |v|^2 in float64, or minus the number of
-    circles with a non-finite position or velocity (the square root of a largest |v|^2 is the
-    largest |v|, bit for bit: a correctly rounded square root is monotonic)."""
-    result = speed_out[0]
-    if speed_out[1] > 0:
-        result = -speed_out[1]
+        result = speed_result(speed_out)
     return result
 
 
@@ -1648,8 +1637,4 @@ def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon,
             clear[1][i] = NO_EVENT
         if ti.static(speed):
             s, bad = speed_of(x, v)
-            if bad > 0:
-                ti.atomic_add(speed_out[1], 1.0)
-            elif s > speed_out[0]:
-                # Reading first leaves only the few new maxima to the (contended) atomic.
-                ti.atomic_max(speed_out[0], s)
+            offer_speed(speed_out, s, bad)

@@ -29,6 +29,27 @@ def speed_of(p, v):
     return v64.norm_sqr(), bad
 
 
+@ti.func
+def offer_speed(out: ti.template(), s, bad):
+    """One circle's (|v|^2, bad) from `speed_of` into a largest-speed pass's out array: out[1]
+    counts the circles that are not finite, out[0] keeps the largest |v|^2 of the others."""
+    if bad > 0:
+        ti.atomic_add(out[1], 1.0)
+    elif s > out[0]:
+        # Reading first leaves only the few new maxima to the (contended) atomic.
+        ti.atomic_max(out[0], s)
+
+
+@ti.func
+def speed_result(out: ti.template()) -> ti.f64:
+    """A largest-speed pass's result from its out array: the largest |v|^2, or minus the number
+    of circles that are not finite (`speed_in` reads the same on the host)."""
+    result = out[0]
+    if out[1] > 0:
+        result = -out[1]
+    return result
+
+
 def speed_from(result: float) -> float:
     """The largest |v| from a kernel's result of the largest |v|^2 (`speed_of`), or that result
     when negative (minus the number of circles that are not finite). A correctly rounded square
@@ -38,7 +59,7 @@ def speed_from(result: float) -> float:
 
 def speed_in(out):
     """`speed_from` of what a largest-speed pass left in its `out` array (a numpy view of it,
-    `launch.host_view`; None, as where there is no view, gives None): as its kernel's result."""
+    `launch.host_view`; None, as where there is no view, gives None): as `speed_result`."""
     if out is None:
         return None
     return speed_from(-float(out[1]) if out[1] > 0 else float(out[0]))
@@ -83,15 +104,8 @@ def _max_speed(pos: ndarr, vel: ndarr, out: ndarr, threads: ti.template()) -> ti
         ti.loop_config(serialize=threads < 0)
         for i in range(n):
             s, bad = speed_of(pos[i], vel[i])
-            if bad > 0:
-                ti.atomic_add(out[1], 1.0)
-            elif s > out[0]:
-                # Reading first leaves only the few new maxima to the (contended) atomic.
-                ti.atomic_max(out[0], s)
-    result = out[0]
-    if out[1] > 0:
-        result = -out[1]
-    return result
+            offer_speed(out, s, bad)
+    return speed_result(out)
 
 
 @launch.kernel

@@ -798,7 +798,6 @@ class Simulation:
             self._set_counter(1, log_count)
 
     def _discrete_step(self, h):
-        self._known_speed = None
         w, hgt = self.box
         real, periodic = self._real, self.periodic
         _, *cells = self.grid.prepare(2.0 * self._r_cut)
