@@ -32,6 +32,14 @@ class OutputError(ValueError):
     """The output cannot be written; the message says why and what to do."""
 
 
+#: Suffixes of files that are not a format written here: a path that ends in one is a file
+#: asked for by mistake (``frames.png``, ``run.avi``), not a folder of PNG frames, unless
+#: that folder already exists.
+NOT_WRITTEN = frozenset(
+    ".png .apng .jpg .jpeg .webp .bmp .tif .tiff .avi .mov .mkv .webm .m4v .mpg .mpeg .wmv .flv .ogv "
+    ".txt .csv .json .npy .npz .pdf .svg .zip".split())
+
+
 def output_kind(path):
     """"mp4", "gif" or "png" (a folder of PNG frames), from the path's suffix."""
     suffix = Path(path).suffix.lower()
@@ -52,6 +60,11 @@ def check_writable(path, fps=None):
         raise OutputError(
             f"a GIF plays at most {GIF_MAX_FPS} frames per second, not {fps:g}: use "
             f"--fps {GIF_MAX_FPS} or less, or write an .mp4")
+    suffix = path.suffix.lower()
+    if kind == "png" and suffix in NOT_WRITTEN and not path.is_dir():
+        raise OutputError(
+            f"cannot write {path}: a {suffix} file is not an output format; write an .mp4, a .gif, "
+            f"or PNG frames into a folder (a path without a suffix, such as {path.with_suffix('')})")
     if kind == "mp4":
         _ffmpeg_executable()
     folder = path if kind == "png" else path.parent

@@ -6,7 +6,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from circles.video import FrameWriter, OutputError, check_writable
+from circles.video import FrameWriter, OutputError, check_writable, output_kind
 
 FPS = 10
 
@@ -106,6 +106,22 @@ def test_unwritable_path_is_refused(tmp_path):
     (tmp_path / "taken.mp4").mkdir()
     with pytest.raises(OutputError, match="is a folder"):
         check_writable(tmp_path / "taken.mp4", FPS)
+
+
+@pytest.mark.parametrize("name", ["frames.png", "run.AVI", "notes.txt"])
+def test_a_file_suffix_of_no_output_format_is_refused(tmp_path, name):
+    """A path that names a file of another format is a mistake, not a folder of PNG frames:
+    refused before anything is made, with the formats to use; an existing folder of that
+    name still takes PNG frames."""
+    path = tmp_path / "new" / name
+    with pytest.raises(OutputError, match=r"not an output format; write an \.mp4, a \.gif, or PNG frames"):
+        check_writable(path, FPS)
+    assert not (tmp_path / "new").exists()
+    path.mkdir(parents=True)
+    assert check_writable(path, FPS) == path
+    assert output_kind(path) == "png"
+    assert output_kind(tmp_path / "run.v2") == "png"  # a folder's name may hold a dot
+    check_writable(tmp_path / "run.v2", FPS)
 
 
 def test_check_makes_folders_and_leaves_no_file(tmp_path):
