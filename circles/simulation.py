@@ -142,6 +142,52 @@ def default_dt(scheme, radius, vel):
     return DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
 
 
+#: Bytes per circle of the arrays a simulation holds on a CPU, by scheme and precision: the
+#: least memory a scene needs, before the temporary arrays of its placement (counted by
+#: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds 61 bytes a
+#: circle more in f32, 81 in f64.
+ARRAY_BYTES = {("event", "f32"): 129, ("event", "f64"): 165, ("discrete", "f32"): 132, ("discrete", "f64"): 156}
+
+
+class NotEnoughMemory(MemoryError, ValueError):
+    """A scene whose arrays would not fit in the memory available (`check_memory`)."""
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the system can give this process now (Linux's MemAvailable), or None
+    where it does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(n: int, scheme: str, precision: str, available=None):
+    """Refuse, before anything is made, a CPU simulation of n circles whose arrays alone
+    (`ARRAY_BYTES`) need more than the memory available (`available_memory`, or `available`
+    bytes when given): it would otherwise be killed part way, or swap for hours. A GPU holds
+    the arrays in its own memory, which Taichi reserves at start; it is not checked here."""
+    if current_arch() != "cpu":
+        return
+    available = available_memory() if available is None else available
+    if available is None:
+        return
+    per = ARRAY_BYTES[(scheme, precision)]
+    need = n * per
+    if need > available:
+        fix = f"at most {available // per} circles"
+        if precision == "f64":
+            fix += f" (in f32, {available // ARRAY_BYTES[(scheme, 'f32')]})"
+        raise NotEnoughMemory(
+            f"n = {n} circles need at least {need / 1e9:.3g} GB for their arrays ({per} bytes a circle with the "
+            f"{scheme} scheme in {precision}), more than the {available / 1e9:.3g} GB of memory available: "
+            f"simulate {fix}, or use a machine with more memory")
+
+
 class Simulation:
     """Circles in a box, advanced in fixed steps of simulated time."""
 
@@ -149,6 +195,7 @@ class Simulation:
         if not isinstance(scene, Scene):
             raise TypeError(f"Simulation takes a circles.Scene, not {type(scene).__name__}")
         ensure_init()
+        check_memory(scene.n, scene.scheme, scene.precision)
         rng = np.random.default_rng(scene.seed)
         n = scene.n
         (rlo, rhi), (vlo, vhi) = scene.radius, scene.speed
@@ -180,6 +227,7 @@ class Simulation:
         n = radius.shape[0]
         if n == 0:
             raise ValueError("n = 0 circles: give at least one")
+        check_memory(n, scheme, precision)
         pos = np.asarray(pos, dtype=np.float64)
         vel = np.asarray(vel, dtype=np.float64)
         for name, arr in (("pos", pos), ("vel", vel)):
@@ -196,7 +244,8 @@ class Simulation:
             out = (pos[:, 0] < radius) | (pos[:, 0] > w - radius) | (pos[:, 1] < radius) | (pos[:, 1] > h - radius)
             if np.any(out):
                 i = int(np.flatnonzero(out)[0])
-                raise ValueError(f"circle {i} at {tuple(pos[i])} with radius {radius[i]} is not inside the walls "
+                at = tuple(float(x) for x in pos[i])
+                raise ValueError(f"circle {i} at {at} with radius {radius[i]} is not inside the walls "
                                  f"[0, {w}] x [0, {h}]: move it inside")
         else:
             pos = pos % np.array([w, h])
@@ -910,6 +959,7 @@ class Simulation:
         ensure_init()
         with np.load(path) as f:
             d = {k: f[k] for k in f.files}
+        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]))
         sim = cls.__new__(cls)
         sim.scene = None
         sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),

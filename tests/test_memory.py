@@ -1,0 +1,79 @@
+"""A scene too large for the memory is refused before anything is made (`check_memory`), from
+the bytes per circle of the arrays a simulation holds (`ARRAY_BYTES`), which are counted here."""
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from circles import cli
+from circles import simulation as simulation_module
+from circles.simulation import ARRAY_BYTES, NotEnoughMemory, check_memory
+from conftest import TEST_ARCH
+
+pytestmark = pytest.mark.skipif(TEST_ARCH != "cpu", reason="the memory checked is a CPU's")
+
+BYTES = {ti.f32: 4, ti.i32: 4, ti.f64: 8}
+
+
+def held_bytes(sim):
+    """Bytes of every Taichi array the simulation and its grid hold (each counted once)."""
+    seen = {}
+    for obj in (sim, sim.grid):
+        for value in vars(obj).values():
+            items = value.values() if isinstance(value, dict) else value if isinstance(value, (tuple, list)) else (
+                value,)
+            for a in items:
+                if isinstance(a, ti.lang._ndarray.Ndarray):
+                    seen[id(a)] = int(np.prod(a.shape)) * getattr(a, "n", 1) * BYTES[a.dtype]
+    return sum(seen.values())
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_array_bytes_are_what_a_simulation_holds(circles_cpu, scheme, precision):
+    """ARRAY_BYTES is a floor: no simulation holds less a circle (else a scene that fits would be
+    refused), and one of 60000 circles (one queue, no parts) holds at most 2% more (the
+    per-circle arrays dominate; the rest is a few cells and buckets per circle)."""
+    n = 60000
+    scene = circles_cpu.Scene(n=n, box=(400.0, 300.0), radius=0.5, speed=(0.5, 1.0), scheme=scheme,
+                              precision=precision, seed=0)
+    sim = circles_cpu.Simulation(scene)
+    sim.step(2)
+    per = held_bytes(sim) / n
+    assert ARRAY_BYTES[(scheme, precision)] <= per <= 1.02 * ARRAY_BYTES[(scheme, precision)], per
+
+
+def test_a_scene_beyond_the_memory_is_refused_with_what_fits(circles_cpu, monkeypatch, tmp_path):
+    with pytest.raises(NotEnoughMemory) as caught:
+        check_memory(10 ** 6, "event", "f64", available=10 ** 8)
+    message = str(caught.value)
+    for part in ("n = 1000000 circles", "0.165 GB", "165 bytes a circle", "event scheme in f64", "0.1 GB",
+                 "at most 606060 circles (in f32, 775193)"):
+        assert part in message, message
+    assert isinstance(caught.value, ValueError) and isinstance(caught.value, MemoryError)
+    check_memory(10 ** 6, "event", "f64", available=165 * 10 ** 6)  # exactly enough: no error
+    # Refused before the circles are drawn or placed, by the constructor and by from_arrays.
+    monkeypatch.setattr(simulation_module, "available_memory", lambda: 2 * ARRAY_BYTES[("discrete", "f32")] - 1)
+    with pytest.raises(NotEnoughMemory, match="n = 2 circles"):
+        circles_cpu.Simulation(circles_cpu.Scene(n=2, box=(4.0, 4.0), radius=0.1, scheme="discrete",
+                                                 precision="f32"))
+    with pytest.raises(NotEnoughMemory, match="n = 2 circles"):
+        circles_cpu.Simulation.from_arrays(np.array([[1.0, 1.0], [3.0, 3.0]]), np.zeros((2, 2)), [0.1, 0.1],
+                                           box=(4.0, 4.0), scheme="discrete", precision="f32")
+    one = circles_cpu.Simulation.from_arrays(np.array([[1.0, 1.0]]), np.zeros((1, 2)), [0.1], box=(4.0, 4.0),
+                                             scheme="discrete", precision="f32")
+    one.save(tmp_path / "one.npz")
+    circles_cpu.Simulation.load(tmp_path / "one.npz")
+    monkeypatch.setattr(simulation_module, "available_memory", lambda: ARRAY_BYTES[("discrete", "f32")] - 1)
+    with pytest.raises(NotEnoughMemory, match="n = 1 circles"):
+        circles_cpu.Simulation.load(tmp_path / "one.npz")
+
+
+def test_the_command_line_refuses_it_with_status_2(circles_cpu, monkeypatch, capsys, tmp_path):
+    monkeypatch.setattr(simulation_module, "available_memory", lambda: 10 ** 4)
+    status = cli.main(["run", "--n", "1000", "--box", "40", "30", "--radius", "0.1", "--arch", "cpu",
+                       "--out", str(tmp_path / "run.gif")])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("circles: error: n = 1000 circles need at least") and "more memory" in err, err
+    assert not (tmp_path / "run.gif").exists()
