@@ -182,8 +182,9 @@ def check_memory(n: int, scheme: str, precision: str, available=None):
         fix = f"at most {available // per} circles"
         if precision == "f64":
             fix += f" (in f32, {available // ARRAY_BYTES[(scheme, 'f32')]})"
+        who = "circle needs" if n == 1 else "circles need"
         raise NotEnoughMemory(
-            f"n = {n} circles need at least {need / 1e9:.3g} GB for their arrays ({per} bytes a circle with the "
+            f"n = {n} {who} at least {need / 1e9:.3g} GB for their arrays ({per} bytes a circle with the "
             f"{scheme} scheme in {precision}), more than the {available / 1e9:.3g} GB of memory available: "
             f"simulate {fix}, or use a machine with more memory")
 

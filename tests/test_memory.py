@@ -65,7 +65,7 @@ def test_a_scene_beyond_the_memory_is_refused_with_what_fits(circles_cpu, monkey
     one.save(tmp_path / "one.npz")
     circles_cpu.Simulation.load(tmp_path / "one.npz")
     monkeypatch.setattr(simulation_module, "available_memory", lambda: ARRAY_BYTES[("discrete", "f32")] - 1)
-    with pytest.raises(NotEnoughMemory, match="n = 1 circles"):
+    with pytest.raises(NotEnoughMemory, match="n = 1 circle needs at least"):
         circles_cpu.Simulation.load(tmp_path / "one.npz")
 
 
