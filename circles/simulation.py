@@ -9,6 +9,7 @@ move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import dataclass
 
 import numpy as np
@@ -153,17 +154,35 @@ class NotEnoughMemory(MemoryError, ValueError):
     """A scene whose arrays would not fit in the memory available (`check_memory`)."""
 
 
-def available_memory() -> int | None:
-    """Bytes of memory the system can give this process now (Linux's MemAvailable), or None
-    where it does not say."""
+#: Where Linux says how much memory this process may still take: the system's MemAvailable,
+#: and a control group's limit and use (version 2, then version 1), relative to the root.
+_MEMINFO = "proc/meminfo"
+_CGROUP_LIMITS = (("sys/fs/cgroup/memory.max", "sys/fs/cgroup/memory.current"),
+                  ("sys/fs/cgroup/memory/memory.limit_in_bytes", "sys/fs/cgroup/memory/memory.usage_in_bytes"))
+
+
+def available_memory(root="/") -> int | None:
+    """Bytes of memory this process can take now, or None where the system does not say: the
+    system's MemAvailable, or less when the process runs in a control group (a container)
+    whose limit leaves less (the least of what each says)."""
+    root = Path(root)
+    available = None
     try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+        for line in (root / _MEMINFO).read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                available = int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
         pass
-    return None
+    for limit_path, usage_path in _CGROUP_LIMITS:
+        try:
+            limit = int((root / limit_path).read_text().split()[0])  # "max" (no limit) is not a number
+            usage = int((root / usage_path).read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            continue
+        if limit < 1 << 60:  # version 1 writes a number near 2^63 for no limit
+            left = max(limit - usage, 0)
+            available = left if available is None else min(available, left)
+    return available
 
 
 def check_memory(n: int, scheme: str, precision: str, available=None):

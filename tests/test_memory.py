@@ -7,7 +7,7 @@ import taichi as ti
 
 from circles import cli
 from circles import simulation as simulation_module
-from circles.simulation import ARRAY_BYTES, NotEnoughMemory, check_memory
+from circles.simulation import ARRAY_BYTES, NotEnoughMemory, available_memory, check_memory
 from conftest import TEST_ARCH
 
 pytestmark = pytest.mark.skipif(TEST_ARCH != "cpu", reason="the memory checked is a CPU's")
@@ -77,3 +77,31 @@ def test_the_command_line_refuses_it_with_status_2(circles_cpu, monkeypatch, cap
     err = capsys.readouterr().err
     assert err.startswith("circles: error: n = 1000 circles need at least") and "more memory" in err, err
     assert not (tmp_path / "run.gif").exists()
+
+
+def write(root, path, text):
+    (root / path).parent.mkdir(parents=True, exist_ok=True)
+    (root / path).write_text(text)
+
+
+def test_available_memory_is_the_least_of_the_system_and_the_control_group(tmp_path):
+    """MemAvailable (kB) alone; less when a control group's limit leaves less (the least of
+    version 2's and version 1's); no limit ("max", or version 1's number near 2^63) changes
+    nothing; None where nothing is said."""
+    assert available_memory(tmp_path) is None
+    write(tmp_path, "proc/meminfo", "MemTotal:  4000000 kB\nMemFree:  1000 kB\nMemAvailable:  2000000 kB\n")
+    assert available_memory(tmp_path) == 2000000 * 1024
+    write(tmp_path, "sys/fs/cgroup/memory/memory.limit_in_bytes", "9223372036854771712\n")
+    write(tmp_path, "sys/fs/cgroup/memory/memory.usage_in_bytes", "1000\n")
+    assert available_memory(tmp_path) == 2000000 * 1024
+    write(tmp_path, "sys/fs/cgroup/memory/memory.limit_in_bytes", "1500000000\n")
+    write(tmp_path, "sys/fs/cgroup/memory/memory.usage_in_bytes", "500000000\n")
+    assert available_memory(tmp_path) == 10 ** 9
+    write(tmp_path, "sys/fs/cgroup/memory.max", "max\n")
+    write(tmp_path, "sys/fs/cgroup/memory.current", "7\n")
+    assert available_memory(tmp_path) == 10 ** 9  # version 2 sets no limit; version 1's holds
+    write(tmp_path, "sys/fs/cgroup/memory.max", "300\n")
+    assert available_memory(tmp_path) == 293
+    (tmp_path / "proc/meminfo").unlink()
+    write(tmp_path, "sys/fs/cgroup/memory.current", "400\n")
+    assert available_memory(tmp_path) == 0
