@@ -9,8 +9,8 @@ move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import taichi as ti
@@ -190,12 +190,12 @@ def check_memory(n: int, scheme: str, precision: str, available=None):
     (`ARRAY_BYTES`) need more than the memory available (`available_memory`, or `available`
     bytes when given): it would otherwise be killed part way, or swap for hours. A GPU holds
     the arrays in its own memory, which Taichi reserves at start; it is not checked here."""
-    if current_arch() != "cpu":
+    per = ARRAY_BYTES.get((scheme, precision))
+    if current_arch() != "cpu" or per is None:  # an unknown scheme is refused where it is read
         return
     available = available_memory() if available is None else available
     if available is None:
         return
-    per = ARRAY_BYTES[(scheme, precision)]
     need = n * per
     if need > available:
         fix = f"at most {available // per} circles"
