@@ -63,9 +63,27 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+def version_text():
+    """This package's version and those of what it runs on, as `circles --version` prints them."""
+    import platform
+    from importlib import metadata
+
+    from . import __version__
+
+    def of(name):
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            return "not installed"
+
+    return (f"circles {__version__} (taichi {of('taichi')}, numpy {of('numpy')}, "
+            f"python {platform.python_version()})")
+
+
 def _build_parser():
     parser = _Parser(prog="circles", description="Simulate many elastic circles in a box "
                      "and write the run as a video, a GIF or PNG frames.")
+    parser.add_argument("--version", action="version", version=version_text())
     commands = parser.add_subparsers(dest="command", metavar="run")
     run = commands.add_parser(
         "run", help="simulate a scene and write its frames",

@@ -143,6 +143,16 @@ def test_help_exits_0(capsys):
     assert "--radius" in capsys.readouterr().out
 
 
+def test_version_names_the_package_and_what_it_runs_on(capsys):
+    import platform
+    import taichi
+
+    assert cli.main(["--version"]) == 0
+    out = capsys.readouterr().out.strip()
+    assert out.startswith(f"circles {circles.__version__} (taichi ")
+    assert ".".join(map(str, taichi.__version__)) in out and platform.python_version() in out, out
+
+
 def test_frame_times_start_at_zero_and_stop_before_the_end():
     assert cli.frame_times(0.5, 10) == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
     assert len(cli.frame_times(5.0, 30)) == 150
