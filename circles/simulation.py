@@ -208,6 +208,18 @@ def check_memory(n: int, scheme: str, precision: str, available=None):
             f"simulate {fix}, or use a machine with more memory")
 
 
+def check_record_events(record_events, scheme):
+    """record_events: a whole number >= 0 (the log's capacity), above 0 only with the event
+    scheme, the one whose collisions are events at known times."""
+    if isinstance(record_events, bool) or not isinstance(record_events, (int, np.integer)) or record_events < 0:
+        raise ValueError(f"record_events = {record_events!r} must be a whole number >= 0 (the most collisions "
+                         "the log keeps; 0 keeps none)")
+    if record_events > 0 and scheme != "event":
+        raise ValueError(f"record_events = {record_events} with scheme {scheme!r}: only the event scheme logs its "
+                         "collisions (the discrete scheme resolves overlaps at the end of each step, with no "
+                         "time of contact); use scheme='event', or record_events=0")
+
+
 class Simulation:
     """Circles in a box, advanced in fixed steps of simulated time."""
 
@@ -215,6 +227,7 @@ class Simulation:
         if not isinstance(scene, Scene):
             raise TypeError(f"Simulation takes a circles.Scene, not {type(scene).__name__}")
         ensure_init()
+        check_record_events(record_events, scene.scheme)
         check_memory(scene.n, scene.scheme, scene.precision)
         rng = np.random.default_rng(scene.seed)
         n = scene.n
@@ -242,6 +255,7 @@ class Simulation:
         _choice("boundary", boundary, BOUNDARIES)
         _choice("scheme", scheme, SCHEMES)
         _choice("precision", precision, PRECISIONS)
+        check_record_events(record_events, scheme)
         dt = check_dt(dt)
         radius = np.asarray(radius, dtype=np.float64).reshape(-1)
         n = radius.shape[0]
@@ -914,12 +928,21 @@ class Simulation:
                                             self._overlap_out, self.periodic))
 
     def state(self) -> State:
+        """The circles now, as numpy float64 arrays in creation order: pos and vel (n, 2), radius
+        and mass (n,), and color (n, 3) uint8."""
         pos = self._creation_order(self.pos.to_numpy()).astype(np.float64)
         vel = self._creation_order(self.vel.to_numpy()).astype(np.float64)
         return State(pos=pos, vel=vel, radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy())
 
     def stats(self) -> dict:
-        """Totals since the start; sums in float64 (see DESIGN.md for the pressure formulas)."""
+        """Totals since the start, sums in float64: time; kinetic_energy (sum of m v^2 / 2);
+        momentum (px, py); pair_collisions and wall_collisions (executed hits that changed
+        velocities); virial, the sum over pair collisions of (r_i + r_j) |J| (J the impulse), and
+        wall_impulse, the sum over wall hits of 2 m |v_n|, from which pressures follow: over a
+        time t, the walls' P = delta wall_impulse / (t perimeter), and in 2D P A = N kT +
+        delta virial / (2 t) with N kT the kinetic energy (the centres' box, W - 2r by H - 2r,
+        in a walled box); max_overlap, the largest overlap of two circles as a fraction of
+        their contact distance."""
         pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
         vel = vel.astype(np.float64)
         m = self._mass
@@ -935,7 +958,11 @@ class Simulation:
         }
 
     def events(self) -> np.ndarray:
-        """Executed collisions (time, i, j) sorted, when made with record_events > 0 (see INTERFACE)."""
+        """The collisions the event scheme executed so far, when made with record_events=CAPACITY
+        > 0: a (k, 3) float64 array of rows (time, i, j) sorted by time, then i, then j. i < j
+        are the creation ids of a pair whose velocities changed; a wall hit has i the circle and
+        j its wall: -1 (x = 0), -2 (x = W), -3 (y = 0) or -4 (y = H). Raises when more than
+        CAPACITY collisions happened."""
         if self._record_cap <= 0:
             raise RuntimeError("events are recorded only with record_events=CAPACITY > 0")
         k = int(self._counters.to_numpy()[1])
@@ -976,6 +1003,8 @@ class Simulation:
 
     @classmethod
     def load(cls, path) -> "Simulation":
+        """A simulation from a file that `save` wrote: the same state, time and step count, so
+        that it goes on as the saved one would have, bit for bit."""
         ensure_init()
         with np.load(path) as f:
             d = {k: f[k] for k in f.files}

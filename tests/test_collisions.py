@@ -149,6 +149,31 @@ def test_mass_ratio_1e6_piston(circles_cpu):
     assert v[1] == pytest.approx(ref.vel[1], rel=1e-9)
 
 
+def test_record_events_is_checked_before_any_work(circles_cpu):
+    """The log's capacity is a whole number >= 0, and above 0 only with the event scheme (the
+    discrete scheme has no times of contact to log): refused at once, naming the value and
+    the fix, by the constructor and by from_arrays."""
+    scene = circles_cpu.Scene(n=10, box=(2.0, 2.0), radius=0.05, scheme="discrete")
+    with pytest.raises(ValueError, match=r"record_events = 5 with scheme 'discrete'.*use scheme='event'"):
+        circles_cpu.Simulation(scene, record_events=5)
+    for bad in (-1, 2.5, True, "100"):
+        with pytest.raises(ValueError, match="must be a whole number >= 0"):
+            circles_cpu.Simulation(circles_cpu.Scene(n=10, box=(2.0, 2.0), radius=0.05), record_events=bad)
+    with pytest.raises(ValueError, match="only the event scheme logs"):
+        circles_cpu.Simulation.from_arrays(np.array([[0.5, 0.5]]), np.zeros((1, 2)), [0.1], box=(2.0, 2.0),
+                                           scheme="discrete", record_events=10)
+    circles_cpu.Simulation(scene, record_events=0)
+    logged = circles_cpu.Simulation(circles_cpu.Scene(n=10, box=(2.0, 2.0), radius=0.05, speed=(1.0, 2.0)),
+                                    record_events=np.int64(1000))
+    logged.advance(2.0)
+    events = logged.events()
+    stats = logged.stats()
+    walls = events[:, 2] < 0
+    assert len(events) == stats["pair_collisions"] + stats["wall_collisions"] > 0
+    assert set(events[walls, 2].astype(int)) <= {-1, -2, -3, -4}
+    assert np.all(events[~walls, 1] < events[~walls, 2])
+
+
 BULLET_DT = 0.1
 BULLET_SPEED = 20 * 2 * R / BULLET_DT  # 20 diameters per step
 
