@@ -20,7 +20,7 @@ and record what happened. It is the yardstick the tests hold the engine's
   reaches ``min(W, H) / 2 - s``; if the earliest hit found lies beyond that
   horizon, a re-prediction of the pair is scheduled at the horizon instead.
 
-Physics (DESIGN.md):
+Physics (as the README's section Physics states it):
 
 - time of impact with ``dx = x_j - x_i``, ``dv = v_j - v_i``, ``s = r_i + r_j``,
   ``b = dx.dv``, ``a = dv.dv``, ``c = dx.dx - s^2``: an event exists when

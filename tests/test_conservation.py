@@ -9,8 +9,8 @@ leaves a factor 100 for the engine and nothing for a real leak.
 
 Overlap: the event scheme collides circles at contact, so the only overlap is
 the round-off of a contact distance, ~1e-16 of the coordinates (~1) over a
-contact distance of ~0.02, i.e. ~1e-14 relative; 1e-9 is the bound DESIGN.md
-asks for.
+contact distance of ~0.02, i.e. ~1e-14 relative; 1e-9 is the bound held here
+(the tolerance `from_arrays` allows its input, simulation.INPUT_OVERLAP_TOLERANCE).
 """
 
 import math

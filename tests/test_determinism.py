@@ -1,8 +1,8 @@
 """Same scene and seed give a bit-identical state: on the CPU with 1 and with
 2 threads (or in two GPU runs, when the suite runs on the GPU), and across save
-and load. Bit-identical means np.array_equal, no tolerance: DESIGN.md asks that
-nothing feeding the state depends on thread timing, so any difference is a race,
-not round-off.
+and load. Bit-identical means np.array_equal, no tolerance: nothing that feeds the
+state may depend on thread timing (event keys order every choice, see
+circles.geometry), so any difference is a race, not round-off.
 
 Each run is a process of its own (see process_util).
 """
