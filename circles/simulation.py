@@ -155,7 +155,7 @@ class NotEnoughMemory(MemoryError, ValueError):
 
 
 #: Where Linux says how much memory this process may still take: the system's MemAvailable,
-#: and a control group's limit and use (version 2, then version 1), relative to the root.
+#: and the limit and use of a control group (version 2 and version 1), relative to the root.
 _MEMINFO = "proc/meminfo"
 _CGROUP_LIMITS = (("sys/fs/cgroup/memory.max", "sys/fs/cgroup/memory.current"),
                   ("sys/fs/cgroup/memory/memory.limit_in_bytes", "sys/fs/cgroup/memory/memory.usage_in_bytes"))
