@@ -27,6 +27,13 @@ def _finite(name, value):
     return float(value)
 
 
+def check_count(name, value, meaning=""):
+    """A whole number >= 0 (not a bool); `meaning`, when given, is said in the error."""
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 0:
+        raise ValueError(f"{name} = {value!r} must be a whole number >= 0" + (f" ({meaning})" if meaning else ""))
+    return int(value)
+
+
 def _choice(name, value, allowed):
     if value not in allowed:
         raise ValueError(f"{name} {value!r} is unknown: use one of {', '.join(map(repr, allowed))}")
@@ -134,8 +141,7 @@ class Scene:
         _choice("scheme", self.scheme, SCHEMES)
         _choice("precision", self.precision, PRECISIONS)
         dt = check_dt(self.dt)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
-            raise ValueError(f"seed = {self.seed!r} must be a whole number >= 0")
+        check_count("seed", self.seed)
         check_fits(rhi, box, self.boundary)
         check_area_fraction(self.expected_area_fraction_of(self.n, box, rlo, rhi), self.n, box)
         object.__setattr__(self, "n", int(self.n))

@@ -20,7 +20,7 @@ from .backend import current_arch, ensure_init, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
-                    check_box, check_dt, check_fits)
+                    check_box, check_count, check_dt, check_fits)
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
 #: cells, and the clusters a split into parts must keep whole, grow with it; a step cut short
@@ -211,9 +211,7 @@ def check_memory(n: int, scheme: str, precision: str, available=None):
 def check_record_events(record_events, scheme):
     """record_events: a whole number >= 0 (the log's capacity), above 0 only with the event
     scheme, the one whose collisions are events at known times."""
-    if isinstance(record_events, bool) or not isinstance(record_events, (int, np.integer)) or record_events < 0:
-        raise ValueError(f"record_events = {record_events!r} must be a whole number >= 0 (the most collisions "
-                         "the log keeps; 0 keeps none)")
+    check_count("record_events", record_events, "the most collisions the log keeps; 0 keeps none")
     if record_events > 0 and scheme != "event":
         raise ValueError(f"record_events = {record_events} with scheme {scheme!r}: only the event scheme logs its "
                          "collisions (the discrete scheme resolves overlaps at the end of each step, with no "
