@@ -13,7 +13,8 @@ still override the file, and --n, --radius, --speed and --seed are refused.
 Frames are taken every 1/fps of simulated time, starting with the state at t = 0, so a run
 of ``duration`` seconds gives ``ceil(duration * fps)`` frames showing t = 0, 1/fps, ...,
 and the video lasts ``duration`` seconds and shows the same motion on every machine. The
-simulation runs the whole ``duration``; the state at the end is summarised, not drawn.
+simulation runs the whole ``duration``; the state at the end is summarised, not drawn. A run
+makes at most MOST_FRAMES frames (refused before any work beyond that).
 
 Exit status: 0 done; 2 bad input (one line on stderr, before any simulating); 1 the run
 failed; 130 stopped by Ctrl-C, with the frames made so far written and playable.
@@ -198,6 +199,7 @@ def _run_options(file_run, args):
     from .canvas import COLOR_MODES
     options["duration"] = _positive("duration", options["duration"])
     options["fps"] = _positive("fps", options["fps"])
+    check_frame_count(options["duration"], options["fps"])
     options["size"] = _parse_size(options["size"])
     for key, allowed in (("color", COLOR_MODES), ("arch", ARCHES)):
         if options[key] not in allowed:
@@ -215,10 +217,26 @@ def _run_options(file_run, args):
     return options
 
 
-def frame_times(duration, fps):
-    """Simulated times of the frames: k / fps for every k with k / fps < duration."""
-    count = max(math.ceil(duration * fps - 1e-9), 1)
-    return [k / fps for k in range(count)]
+#: Frames a run may make at most: about 9 hours of video at 30 frames per second. More is
+#: a mistyped duration or fps, and would fill the disk (or, as a GIF, never finish).
+MOST_FRAMES = 1_000_000
+
+
+def frame_count(duration, fps):
+    """How many frames a run makes: one at each k / fps with k / fps < duration (a last,
+    partial interval gets one), at least one."""
+    return max(math.ceil(duration * fps - 1e-9), 1)
+
+
+def check_frame_count(duration, fps):
+    """The frame count (`frame_count`), or a UsageError when it exceeds MOST_FRAMES."""
+    frames = duration * fps  # both are finite and positive (`_positive`); the product may be inf
+    if frames > MOST_FRAMES:
+        count = f"{frames:.3g} frames" if math.isfinite(frames) else "more frames than a float holds"
+        raise UsageError(f"duration {duration:g} s at {fps:g} fps makes {count}, more than "
+                         f"the {MOST_FRAMES} a run may make: shorten --duration or lower --fps, so that "
+                         f"duration times fps is at most {MOST_FRAMES}")
+    return frame_count(duration, fps)
 
 
 #: Flags that shape a random scene only: refused with a file that lists its circles.
@@ -320,18 +338,18 @@ def _run(scene, options):
     start_stats = sim.stats()
     stats_s = time.perf_counter() - tick
     width, height = options["size"]
-    times = frame_times(options["duration"], options["fps"])
+    frames = frame_count(options["duration"], options["fps"])
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
     writer = FrameWriter(options["out"], options["fps"])
-    bar = tqdm(total=len(times), unit="frame", file=sys.stderr, disable=None,
+    bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
                dynamic_ncols=True, desc="circles")
     stop = _StopRequest()
     interrupted = False
     previous_handler = signal.getsignal(signal.SIGINT)
     try:
         signal.signal(signal.SIGINT, stop)
-        for k in range(len(times)):
+        for k in range(frames):
             tick = time.perf_counter()
             if speed_scale is None:
                 # Fixed for the whole run, so that a colour means one speed in every frame.
@@ -344,7 +362,7 @@ def _run(scene, options):
             if stop.requested:
                 break
             tick = time.perf_counter()
-            end = times[k + 1] if k + 1 < len(times) else options["duration"]
+            end = (k + 1) / options["fps"] if k + 1 < frames else options["duration"]
             sim.advance(end - sim.time)
             clock["simulate"] += time.perf_counter() - tick
             bar.update(1)
@@ -391,7 +409,7 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
         ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
-        ("wrote", f"{writer.path} ({writer.frames} frames at {writer.fps:g} fps)"),
+        ("wrote", f"{writer.path} ({writer.frames} frame{'s' if writer.frames != 1 else ''} at {writer.fps:g} fps)"),
     ]
     for name, text in lines:
         print(f"{name:<11} {text}")

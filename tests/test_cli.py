@@ -98,6 +98,9 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     (["fly"], ["fly"]),
     (["run", "missing.toml"], ["missing.toml", "not found"]),
     (["run", "--out", "run.gif", "--fps", "60"], ["GIF", "50"]),
+    # A mistyped duration: 3e13 frames would fill the disk, and listing them the memory.
+    (["run", "--duration", "1e12"], ["1e+12", "3e+13 frames", "1000000", "--duration", "--fps"]),
+    (["run", "--duration", "1e300", "--fps", "1e300"], ["1e+300", "more frames than a float holds"]),
 ])
 def test_bad_input_exits_2_with_one_line(args, words, capsys, monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
@@ -153,10 +156,15 @@ def test_version_names_the_package_and_what_it_runs_on(capsys):
     assert ".".join(map(str, taichi.__version__)) in out and platform.python_version() in out, out
 
 
-def test_frame_times_start_at_zero_and_stop_before_the_end():
-    assert cli.frame_times(0.5, 10) == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
-    assert len(cli.frame_times(5.0, 30)) == 150
-    assert len(cli.frame_times(1.05, 30)) == 32  # a last, partial interval gets a frame
+def test_frame_count_covers_the_duration():
+    """One frame at each k / fps before the end: t = 0, 0.1, ..., 0.4 for 0.5 s at 10 fps."""
+    assert cli.frame_count(0.5, 10) == 5
+    assert cli.frame_count(5.0, 30) == 150
+    assert cli.frame_count(1.05, 30) == 32  # a last, partial interval gets a frame
+    assert cli.frame_count(1e-9, 30) == 1
+    assert cli.check_frame_count(cli.MOST_FRAMES / 40, 40) == cli.MOST_FRAMES  # exact in binary
+    with pytest.raises(cli.UsageError, match="1e\\+06 frames"):
+        cli.check_frame_count(cli.MOST_FRAMES / 40 + 1, 40)
 
 
 # ---- scene files that list their circles ([[circle]] tables) -------------------------
