@@ -9,6 +9,8 @@ move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 from __future__ import annotations
 
 import math
+import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -206,6 +208,42 @@ def check_memory(n: int, scheme: str, precision: str, available=None):
             f"n = {n} {who} at least {need / 1e9:.3g} GB for their arrays ({per} bytes a circle with the "
             f"{scheme} scheme in {precision}), more than the {available / 1e9:.3g} GB of memory available: "
             f"simulate {fix}, or use a machine with more memory")
+
+
+#: The arrays of a file that `Simulation.save` writes.
+SAVED_FIELDS = ("pos", "vel", "radius", "mass", "color", "box", "boundary", "scheme", "precision", "dt", "time",
+                "steps", "pair_count", "wall_count", "virial", "wall_impulse")
+
+
+def _read_saved(path):
+    """The arrays of a file that `Simulation.save` wrote, by name; ValueError for any other file."""
+    def refuse(why):
+        return ValueError(f"{path} is not a simulation written by Simulation.save ({why}): load the file that "
+                          "save wrote")
+
+    try:
+        f = np.load(path)
+    except (FileNotFoundError, IsADirectoryError, PermissionError):
+        raise
+    except (ValueError, zipfile.BadZipFile):  # numpy takes what is neither .npy nor .npz for a pickle
+        raise refuse("it is not an .npz archive") from None
+    except (OSError, EOFError) as error:
+        raise refuse(f"numpy cannot read it: {error}") from None
+    if not isinstance(f, np.lib.npyio.NpzFile):
+        raise refuse("it holds one array, not an .npz archive")
+    with f:
+        missing = [k for k in SAVED_FIELDS if k not in f.files]
+        if missing:
+            raise refuse(f"it lacks {', '.join(missing)}")
+        try:
+            d = {k: f[k] for k in SAVED_FIELDS}
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:  # a damaged member
+            raise refuse(f"numpy cannot read its arrays: {error}") from None
+    n = d["radius"].shape[0]
+    for name, shape in (("pos", (n, 2)), ("vel", (n, 2)), ("mass", (n,)), ("color", (n, 3)), ("box", (2,))):
+        if d[name].shape != shape:
+            raise refuse(f"its {name} has shape {d[name].shape}, not {shape}")
+    return d
 
 
 def check_record_events(record_events, scheme):
@@ -991,21 +1029,39 @@ class Simulation:
                       speed_scale=speed_scale)
 
     # ------------------------------------------------------------ save / load
-    def save(self, path):
-        """Write the state exactly (in the working precision, creation order) to an .npz file."""
+    def save(self, path) -> Path:
+        """Write the state exactly (in the working precision, creation order) to the file `path`
+        as an .npz archive, whatever its suffix (numpy's own savez would add .npz to a name
+        without it); returns the path. The archive is written beside it under a temporary name
+        and then renamed, so a failed save leaves no partial file and keeps an older one."""
+        path = Path(path)
+        if path.is_dir():
+            raise IsADirectoryError(f"cannot save to {path}: it is a folder; give a file's path, such as "
+                                    f"{path / 'run.npz'}")
+        if not path.parent.is_dir():
+            raise FileNotFoundError(f"cannot save to {path}: the folder {path.parent} does not exist; make it first")
         pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
-        np.savez(path, pos=pos, vel=vel, radius=self._radius, mass=self._mass,
-                 color=self._color, box=np.array(self.box), boundary=self.boundary, scheme=self.scheme,
-                 precision=self.precision, dt=self.dt, time=self.time, steps=self.steps,
-                 pair_count=pair_count, wall_count=wall_count, virial=virial, wall_impulse=wall_impulse)
+        fields = dict(pos=pos, vel=vel, radius=self._radius, mass=self._mass, color=self._color,
+                      box=np.array(self.box), boundary=self.boundary, scheme=self.scheme,
+                      precision=self.precision, dt=self.dt, time=self.time, steps=self.steps,
+                      pair_count=pair_count, wall_count=wall_count, virial=virial,
+                      wall_impulse=wall_impulse)
+        part = path.with_name(f".{path.name}.{os.getpid()}.part")
+        try:
+            with open(part, "wb") as f:
+                np.savez(f, **fields)
+            os.replace(part, path)
+        finally:
+            part.unlink(missing_ok=True)
+        return path
 
     @classmethod
     def load(cls, path) -> "Simulation":
         """A simulation from a file that `save` wrote: the same state, time and step count, so
-        that it goes on as the saved one would have, bit for bit."""
+        that it goes on as the saved one would have, bit for bit. A file that is not such an
+        archive raises ValueError (a missing one FileNotFoundError)."""
         ensure_init()
-        with np.load(path) as f:
-            d = {k: f[k] for k in f.files}
+        d = _read_saved(path)
         check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]))
         sim = cls.__new__(cls)
         sim.scene = None

@@ -122,3 +122,56 @@ def test_stats_continue_after_load(circles_cpu, tmp_path):
         assert a[key] == b[key], key
     for key in ("virial", "wall_impulse", "kinetic_energy"):
         assert b[key] == pytest.approx(a[key], rel=1e-12), key
+
+
+def test_save_writes_the_path_given_and_nothing_half_written(circles_cpu, tmp_path, monkeypatch):
+    """save writes exactly the path it is given (numpy's savez would add .npz to it), and a
+    save that fails leaves the older file as it was and no partial one beside it."""
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=60, box=(3.0, 2.0), radius=0.08, seed=5))
+    sim.step(3)
+    path = tmp_path / "state.bin"
+    assert sim.save(path) == path
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["state.bin"]
+    loaded = circles_cpu.Simulation.load(path)
+    assert loaded.time == sim.time and loaded.steps == sim.steps
+    assert np.array_equal(loaded.state().pos, sim.state().pos)
+    assert np.array_equal(loaded.state().vel, sim.state().vel)
+
+    before = path.read_bytes()
+    sim.step(2)
+
+    def disk_full(file, **arrays):
+        file.write(b"PK\x03\x04 the first bytes of an archive")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        sim.save(path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["state.bin"]
+    monkeypatch.undo()
+
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        sim.save(tmp_path)
+    with pytest.raises(FileNotFoundError, match="folder .*missing does not exist"):
+        sim.save(tmp_path / "missing" / "run.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["state.bin"]
+
+
+def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=40, box=(3.0, 2.0), radius=0.08, seed=6))
+    good = sim.save(tmp_path / "good.npz")
+    fields = dict(np.load(good))
+    (tmp_path / "notes.npz").write_text("not an archive")
+    np.save(tmp_path / "one.npy", fields["pos"])
+    np.savez(tmp_path / "partial.npz", pos=fields["pos"], vel=fields["vel"])
+    np.savez(tmp_path / "shape.npz", **{**fields, "pos": fields["pos"][:-1]})
+    (tmp_path / "cut.npz").write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    for name, why in (("notes.npz", "not an .npz archive"), ("one.npy", "one array"),
+                      ("partial.npz", "lacks radius, mass, color, box"), ("shape.npz", "pos has shape"),
+                      ("cut.npz", "not an .npz archive")):
+        with pytest.raises(ValueError, match="not a simulation written by Simulation.save") as refused:
+            circles_cpu.Simulation.load(tmp_path / name)
+        assert why in str(refused.value) and name in str(refused.value), str(refused.value)
+    with pytest.raises(FileNotFoundError):
+        circles_cpu.Simulation.load(tmp_path / "absent.npz")
