@@ -243,6 +243,20 @@ def _read_saved(path):
     for name, shape in (("pos", (n, 2)), ("vel", (n, 2)), ("mass", (n,)), ("color", (n, 3)), ("box", (2,))):
         if d[name].shape != shape:
             raise refuse(f"its {name} has shape {d[name].shape}, not {shape}")
+    try:
+        for name, allowed in (("boundary", BOUNDARIES), ("scheme", SCHEMES), ("precision", PRECISIONS)):
+            _choice(name, str(d[name]), allowed)
+        check_box(tuple(d["box"]))
+        check_dt(float(d["dt"]))
+        check_count("steps", int(d["steps"]))
+    except (ValueError, TypeError) as error:
+        raise refuse(f"its {error}") from None
+    if not (math.isfinite(float(d["time"])) and float(d["time"]) >= 0):
+        raise refuse(f"its time {d['time']} is not a finite number >= 0")
+    for name in ("pos", "vel", "radius", "mass"):
+        bad = ~np.isfinite(d[name]) | ((d[name] <= 0) if name in ("radius", "mass") else False)
+        if np.any(bad):
+            raise refuse(f"its {name} holds {d[name][bad][0]}")
     return d
 
 

@@ -167,9 +167,13 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
     np.savez(tmp_path / "partial.npz", pos=fields["pos"], vel=fields["vel"])
     np.savez(tmp_path / "shape.npz", **{**fields, "pos": fields["pos"][:-1]})
     (tmp_path / "cut.npz").write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    np.savez(tmp_path / "scheme.npz", **{**fields, "scheme": "magic"})
+    np.savez(tmp_path / "radius.npz", **{**fields, "radius": np.where(np.arange(40) == 7, 0.0, fields["radius"])})
+    np.savez(tmp_path / "time.npz", **{**fields, "time": np.nan})
     for name, why in (("notes.npz", "not an .npz archive"), ("one.npy", "one array"),
                       ("partial.npz", "lacks radius, mass, color, box"), ("shape.npz", "pos has shape"),
-                      ("cut.npz", "not an .npz archive")):
+                      ("cut.npz", "not an .npz archive"), ("scheme.npz", "scheme 'magic' is unknown"),
+                      ("radius.npz", "radius holds 0.0"), ("time.npz", "time nan")):
         with pytest.raises(ValueError, match="not a simulation written by Simulation.save") as refused:
             circles_cpu.Simulation.load(tmp_path / name)
         assert why in str(refused.value) and name in str(refused.value), str(refused.value)
