@@ -5,7 +5,18 @@ import taichi as ti
 
 ARCHES = ("auto", "cpu", "gpu")
 
-_state = {"initialized": False, "arch": None}
+_state = {"initialized": False, "arch": None, "runtime": 0}
+#: Callables run before `init` restarts the runtime, to let go of the arrays the running one
+#: made (`on_restart`).
+_restart_hooks = []
+
+
+def on_restart(hook):
+    """Run `hook()` before each restart of the runtime by `init`: it drops every Taichi array it
+    holds. Arrays that outlive the runtime that made them crash later kernels of the next one
+    (seen with Taichi 1.7 on a CPU: a step after the restart ends the process), so none may."""
+    _restart_hooks.append(hook)
+    return hook
 
 
 def init(arch: str = "auto", **options) -> str:
@@ -14,7 +25,7 @@ def init(arch: str = "auto", **options) -> str:
     `options` go to `ti.init` unchanged (for example `cpu_max_num_threads=1`).
     "gpu" fails with a clear error when no GPU backend can start; "auto" takes a GPU when
     one is present and the CPU otherwise. Calling it again restarts the runtime: every
-    Simulation made before becomes unusable.
+    Simulation made before lets go of its arrays and raises a RuntimeError when used.
     """
     if arch not in ARCHES:
         raise ValueError(f"arch {arch!r} is unknown: use one of {', '.join(ARCHES)}")
@@ -23,7 +34,10 @@ def init(arch: str = "auto", **options) -> str:
     # whichever circle of a pair comes first, so results do not depend on memory order.
     options.setdefault("fast_math", False)
     if _state["initialized"]:
+        for hook in _restart_hooks:
+            hook()
         ti.reset()
+    _state["runtime"] += 1  # the arrays of every earlier runtime are gone (`runtime`)
     if arch == "cpu":
         ti.init(arch=ti.cpu, **options)
     else:
@@ -49,6 +63,12 @@ def ensure_init() -> str:
 
 def current_arch() -> str | None:
     return _state["arch"]
+
+
+def runtime() -> int:
+    """A number that changes each time `init` starts the runtime: arrays made under another
+    number were freed by the restart."""
+    return _state["runtime"]
 
 
 #: Up to this many circles, the loops of a step on a CPU run on one thread: starting a parallel

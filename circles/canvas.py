@@ -59,6 +59,8 @@ import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
+from .backend import on_restart
+
 COLOR_MODES = ("random", "speed")
 MAX_IMAGE_SIDE = 16384
 # Colour of the letterbox margin outside the box, as a fraction of the background.
@@ -696,7 +698,14 @@ class _Buffers:
             self.entries = ti.ndarray(ti.math.vec4, shape=(capacity,))
 
 
+    def drop(self):
+        """Let go of every array (before `circles.init` restarts the runtime)."""
+        self.__dict__.clear()
+        self.__init__()
+
+
 _buffers = _Buffers()
+on_restart(_buffers.drop)
 
 
 def _check_size(name, value):

@@ -9,7 +9,9 @@ move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 from __future__ import annotations
 
 import math
+import gc
 import os
+import weakref
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +20,7 @@ import numpy as np
 import taichi as ti
 
 from . import discrete, event, launch, placement, reductions
-from .backend import current_arch, ensure_init, serial_loops
+from .backend import current_arch, ensure_init, on_restart, runtime, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
@@ -270,6 +272,19 @@ def check_record_events(record_events, scheme):
                          "time of contact); use scheme='event', or record_events=0")
 
 
+#: Every Simulation that holds arrays of the running runtime (see `_release_all`).
+_LIVE = weakref.WeakSet()
+
+
+@on_restart
+def _release_all():
+    """Before `circles.init` restarts the runtime: every live simulation lets go of its arrays
+    (see `backend.on_restart`); using one afterwards raises (`Simulation._live`)."""
+    gc.collect()  # simulations no longer reachable go with their arrays
+    for sim in list(_LIVE):
+        sim._release()
+
+
 class Simulation:
     """Circles in a box, advanced in fixed steps of simulated time."""
 
@@ -348,6 +363,8 @@ class Simulation:
 
     # ----------------------------------------------------------------- set-up
     def _setup(self, pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events):
+        self._runtime = runtime()
+        _LIVE.add(self)
         n = radius.shape[0]
         self.n = n
         self.box = (float(box[0]), float(box[1]))
@@ -621,8 +638,27 @@ class Simulation:
         self._list_large()
 
     # ---------------------------------------------------------------- stepping
+    def _live(self):
+        """Raise unless this simulation's arrays still exist: `circles.init` called again
+        restarts Taichi's runtime, which frees every array made before it."""
+        if self._runtime != runtime():
+            raise RuntimeError("this Simulation was made before circles.init was called again, which restarted "
+                               "the runtime and freed its arrays: make it again after circles.init (to carry a "
+                               "state across, save it before the call and load it after)")
+
+    def _release(self):
+        """Let go of every Taichi array (and the grid and views that hold them); what describes
+        the simulation (n, box, scheme, time, ...) stays, so it still prints."""
+        keep = {"scene", "n", "box", "boundary", "scheme", "precision", "periodic", "dt", "time", "steps",
+                "_runtime"}
+        for name in list(vars(self)):
+            if name not in keep:
+                delattr(self, name)
+        _LIVE.discard(self)
+
     def advance(self, duration: float):
         """Advance by `duration` of simulated time, ending exactly at the old time + duration."""
+        self._live()
         duration = float(duration)
         if not math.isfinite(duration) or duration < 0:
             raise ValueError(f"duration {duration} must be finite and >= 0")
@@ -639,6 +675,7 @@ class Simulation:
 
     def step(self, k: int = 1):
         """Take k steps of length dt."""
+        self._live()
         if int(k) != k or k < 0:
             raise ValueError(f"k = {k} must be a whole number >= 0")
         for _ in range(int(k)):
@@ -980,6 +1017,7 @@ class Simulation:
     def state(self) -> State:
         """The circles now, as numpy float64 arrays in creation order: pos and vel (n, 2), radius
         and mass (n,), and color (n, 3) uint8."""
+        self._live()
         pos = self._creation_order(self.pos.to_numpy()).astype(np.float64)
         vel = self._creation_order(self.vel.to_numpy()).astype(np.float64)
         return State(pos=pos, vel=vel, radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy())
@@ -993,6 +1031,7 @@ class Simulation:
         delta virial / (2 t) with N kT the kinetic energy (the centres' box, W - 2r by H - 2r,
         in a walled box); max_overlap, the largest overlap of two circles as a fraction of
         their contact distance."""
+        self._live()
         pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
         vel = vel.astype(np.float64)
         m = self._mass
@@ -1013,6 +1052,7 @@ class Simulation:
         are the creation ids of a pair whose velocities changed; a wall hit has i the circle and
         j its wall: -1 (x = 0), -2 (x = W), -3 (y = 0) or -4 (y = H). Raises when more than
         CAPACITY collisions happened."""
+        self._live()
         if self._record_cap <= 0:
             raise RuntimeError("events are recorded only with record_events=CAPACITY > 0")
         k = int(self._counters.to_numpy()[1])
@@ -1027,6 +1067,7 @@ class Simulation:
 
     def render(self, width: int = 1280, height: int = 720, color: str = "random", *, speed_scale=None) -> np.ndarray:
         """The circles drawn into a (height, width, 3) uint8 image (see `circles.canvas.render`)."""
+        self._live()
         from .canvas import render, speed_scale_of
         # Drawing does not depend on the order of the circles (coverage sums are exact
         # integers), so the arrays go as stored, without putting them in creation order.
@@ -1048,6 +1089,7 @@ class Simulation:
         as an .npz archive, whatever its suffix (numpy's own savez would add .npz to a name
         without it); returns the path. The archive is written beside it under a temporary name
         and then renamed, so a failed save leaves no partial file and keeps an older one."""
+        self._live()
         path = Path(path)
         if path.is_dir():
             raise IsADirectoryError(f"cannot save to {path}: it is a folder; give a file's path, such as "

@@ -179,3 +179,48 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
         assert why in str(refused.value) and name in str(refused.value), str(refused.value)
     with pytest.raises(FileNotFoundError):
         circles_cpu.Simulation.load(tmp_path / "absent.npz")
+
+
+RESTART = """
+import sys
+import numpy as np
+import circles
+circles.init(arch="cpu")
+scene = circles.Scene(n=300, box=(4.0, 3.0), radius=(0.04, 0.06), seed=9)
+a = circles.Simulation(scene)
+a.step(6)
+a.render(64, 36)
+before = a.state()
+b = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=9, scheme="discrete"))
+b.step(2)
+circles.init(arch="cpu", cpu_max_num_threads=1)
+refused = []
+for name, call in (("step", lambda: a.step(1)), ("advance", lambda: b.advance(0.1)), ("state", a.state),
+                   ("stats", b.stats), ("render", lambda: a.render(64, 36)), ("save", lambda: a.save(sys.argv[2] + ".x")),
+                   ("events", a.events)):
+    try:
+        call()
+    except RuntimeError as error:
+        if "made before circles.init was called again" in str(error):
+            refused.append(name)
+assert repr(a).startswith("Simulation(n=300, "), repr(a)
+c = circles.Simulation(scene)
+c.step(6)
+c.render(64, 36)
+d = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=9, scheme="discrete"))
+d.step(2)
+np.savez(sys.argv[2], pos_before=before.pos, vel_before=before.vel, pos=c.state().pos, vel=c.state().vel,
+         refused=np.array(refused), pairs=d.stats()["pair_collisions"])
+"""
+
+
+def test_a_restart_of_the_runtime_leaves_old_simulations_refusing_and_new_ones_exact(tmp_path):
+    """circles.init called again restarts Taichi: the simulations made before let go of their
+    arrays and refuse every use with a RuntimeError that says so (before, a step of a new
+    simulation after the restart ended the process with a segmentation fault), and a new
+    simulation runs as in a fresh process (one thread now, two before: the same state bit for
+    bit)."""
+    out = run_script(RESTART, "cpu", tmp_path / "restart.npz", timeout=600)
+    assert sorted(out["refused"].tolist()) == ["advance", "events", "render", "save", "state", "stats", "step"]
+    assert np.array_equal(out["pos"], out["pos_before"]) and np.array_equal(out["vel"], out["vel_before"])
+    assert int(out["pairs"]) > 0
