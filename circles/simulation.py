@@ -272,6 +272,15 @@ def check_record_events(record_events, scheme):
                          "time of contact); use scheme='event', or record_events=0")
 
 
+#: Counters of a simulation's work that its copies carry (see `Simulation.copy`).
+WORK_COUNTERS = ("rounds", "sweeps", "cut_steps", "parts_run")
+
+
+def _unpickle(fields, scene, extras):
+    """A pickled Simulation (`Simulation.__reduce__`) made again."""
+    return Simulation._from_fields(fields, scene, extras)
+
+
 #: Every Simulation that holds arrays of the running runtime (see `_release_all`).
 _LIVE = weakref.WeakSet()
 
@@ -1084,6 +1093,67 @@ class Simulation:
                       speed_scale=speed_scale)
 
     # ------------------------------------------------------------ save / load
+    def _fields(self) -> dict:
+        """What `save` writes (`SAVED_FIELDS`): the state in creation order, exactly as stored,
+        and what describes the run."""
+        pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
+        return dict(pos=pos, vel=vel, radius=self._radius.copy(), mass=self._mass.copy(), color=self._color.copy(),
+                    box=np.array(self.box), boundary=self.boundary, scheme=self.scheme, precision=self.precision,
+                    dt=self.dt, time=self.time, steps=self.steps, pair_count=pair_count, wall_count=wall_count,
+                    virial=virial, wall_impulse=wall_impulse)
+
+    def _extras(self) -> dict:
+        """What a copy carries besides `_fields`: the event log and the work counters."""
+        extras = {name: getattr(self, name) for name in WORK_COUNTERS}
+        if self._record_cap > 0:
+            extras["log"] = (self._record_cap, self._counters.to_numpy(), self._log_t.to_numpy(),
+                             self._log_i.to_numpy(), self._log_j.to_numpy())
+        return extras
+
+    @classmethod
+    def _from_fields(cls, d, scene=None, extras=None) -> "Simulation":
+        """A simulation in the state `_fields` (or a file, `_read_saved`) gives, with `extras`
+        (`_extras`) when given."""
+        ensure_init()
+        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]))
+        extras = extras or {}
+        log = extras.get("log")
+        sim = cls.__new__(cls)
+        sim.scene = scene
+        sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
+                   str(d["scheme"]), str(d["precision"]), float(d["dt"]), 0 if log is None else log[0])
+        sim._upload(d["pos"], d["vel"], d["pair_count"], d["wall_count"], d["virial"], d["wall_impulse"])
+        sim.time = float(d["time"])
+        sim.steps = int(d["steps"])
+        for name in WORK_COUNTERS:
+            if name in extras:
+                setattr(sim, name, extras[name])
+        if log is not None:
+            for arr, values in zip((sim._counters, sim._log_t, sim._log_i, sim._log_j), log[1:]):
+                arr.from_numpy(values)
+        return sim
+
+    def copy(self) -> "Simulation":
+        """An independent simulation in the same state, with arrays of its own (and its own copy
+        of the event log): it goes on as this one would, bit for bit. `copy.copy` and
+        `copy.deepcopy` make the same (a copy sharing the arrays would be two simulations
+        stepping one state)."""
+        self._live()
+        return Simulation._from_fields(self._fields(), self.scene, self._extras())
+
+    def __copy__(self):
+        return self.copy()
+
+    def __deepcopy__(self, memo):
+        return self.copy()
+
+    def __reduce__(self):
+        """Pickling (for multiprocessing, say) carries what `copy` does; unpickling makes the
+        arrays in the receiving process's runtime (started with arch="auto" unless
+        `circles.init` was called there)."""
+        self._live()
+        return _unpickle, (self._fields(), self.scene, self._extras())
+
     def save(self, path) -> Path:
         """Write the state exactly (in the working precision, creation order) to the file `path`
         as an .npz archive, whatever its suffix (numpy's own savez would add .npz to a name
@@ -1096,12 +1166,7 @@ class Simulation:
                                     f"{path / 'run.npz'}")
         if not path.parent.is_dir():
             raise FileNotFoundError(f"cannot save to {path}: the folder {path.parent} does not exist; make it first")
-        pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
-        fields = dict(pos=pos, vel=vel, radius=self._radius, mass=self._mass, color=self._color,
-                      box=np.array(self.box), boundary=self.boundary, scheme=self.scheme,
-                      precision=self.precision, dt=self.dt, time=self.time, steps=self.steps,
-                      pair_count=pair_count, wall_count=wall_count, virial=virial,
-                      wall_impulse=wall_impulse)
+        fields = self._fields()
         part = path.with_name(f".{path.name}.{os.getpid()}.part")
         try:
             with open(part, "wb") as f:
@@ -1117,16 +1182,7 @@ class Simulation:
         that it goes on as the saved one would have, bit for bit. A file that is not such an
         archive raises ValueError (a missing one FileNotFoundError)."""
         ensure_init()
-        d = _read_saved(path)
-        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]))
-        sim = cls.__new__(cls)
-        sim.scene = None
-        sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
-                   str(d["scheme"]), str(d["precision"]), float(d["dt"]), 0)
-        sim._upload(d["pos"], d["vel"], d["pair_count"], d["wall_count"], d["virial"], d["wall_impulse"])
-        sim.time = float(d["time"])
-        sim.steps = int(d["steps"])
-        return sim
+        return cls._from_fields(_read_saved(path))
 
     def __repr__(self):
         return (f"Simulation(n={self.n}, box={self.box}, boundary={self.boundary!r}, scheme={self.scheme!r}, "
