@@ -254,3 +254,53 @@ def test_copies_and_pickles_are_independent_and_go_on_bit_for_bit(circles_cpu, s
         assert other.stats()["pair_collisions"] == sim.stats()["pair_collisions"] > 0, name
         if scheme == "event":
             assert np.array_equal(other.events(), sim.events()), name
+
+
+INTERRUPTED = """
+import os, signal, sys
+import numpy as np
+import circles
+from circles import discrete, event
+circles.init(arch="cpu")
+scheme, call = sys.argv[3], sys.argv[4]
+scene = circles.Scene(n=400, box=(4.0, 3.0), radius=(0.03, 0.06), seed=13, scheme=scheme)
+sim = circles.Simulation(scene)
+sim.step(3)
+module, name = (discrete, "begin_step") if scheme == "discrete" else (event, "queue_step")
+kernel = getattr(module, name)
+calls = []
+
+def pressed(*args):
+    # Ctrl-C right after the kernel that moves the circles, in the middle of the 4th step.
+    result = kernel(*args)
+    calls.append(1)
+    if len(calls) == 4:
+        os.kill(os.getpid(), signal.SIGINT)
+    return result
+
+setattr(module, name, pressed)
+try:
+    sim.step(10) if call == "step" else sim.advance(10 * sim.dt)
+    stopped = False
+except KeyboardInterrupt:
+    stopped = True
+setattr(module, name, kernel)
+straight = circles.Simulation(scene)
+straight.step(sim.steps)
+np.savez(sys.argv[2], stopped=stopped, steps=sim.steps, time=sim.time, straight_time=straight.time,
+         pos=sim.state().pos, straight_pos=straight.state().pos, vel=sim.state().vel,
+         straight_vel=straight.state().vel)
+"""
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+@pytest.mark.parametrize("call", ["step", "advance"])
+def test_ctrl_c_stops_between_steps_with_a_whole_state(tmp_path, scheme, call):
+    """A Ctrl-C that comes in the middle of a step (sent right after the kernel that moves the
+    circles) raises KeyboardInterrupt once that step is done: the simulation holds the state
+    of its whole steps, as a run of that many steps does, bit for bit. Before, it stopped
+    between two kernels of the step, with the circles moved and the clock not."""
+    out = run_script(INTERRUPTED, "cpu", tmp_path / "stopped.npz", scheme, call, timeout=600)
+    assert bool(out["stopped"]) and int(out["steps"]) == 3 + 4
+    assert float(out["time"]) == pytest.approx(float(out["straight_time"]), rel=1e-12)
+    assert np.array_equal(out["pos"], out["straight_pos"]) and np.array_equal(out["vel"], out["straight_vel"])
