@@ -697,7 +697,6 @@ class _Buffers:
             # Per entry: image centre x, y and radius in pixels, and the colour's bytes.
             self.entries = ti.ndarray(ti.math.vec4, shape=(capacity,))
 
-
     def drop(self):
         """Let go of every array (before `circles.init` restarts the runtime)."""
         self.__dict__.clear()

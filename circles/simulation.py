@@ -8,8 +8,8 @@ move, grid, rounds of pick / resolve, walls (see `circles.discrete`).
 """
 from __future__ import annotations
 
-import math
 import gc
+import math
 import os
 import signal
 import threading
@@ -279,12 +279,13 @@ class _WholeSteps:
     one: a step stopped between its kernels would leave circles moved to different times and
     the simulation's clock behind them.
 
-    The first call in the main thread (where Python runs signal handlers) puts this object in
-    place of the SIGINT handler it finds, when that is a Python callable (Python's own, which
-    raises KeyboardInterrupt, or a program's): outside steps it passes each press straight on;
-    during a step it counts them, and passes them on when the step ends. Installed once, as a
-    call of signal.signal costs microseconds (a tenth of a step of a few hundred circles): a
-    program that puts in a handler of its own later takes its presses itself."""
+    Used in the main thread only, where Python runs signal handlers (`_whole_steps`). Its first
+    use puts this object in place of the SIGINT handler it finds, when that is a Python
+    callable (Python's own, which raises KeyboardInterrupt, or a program's): outside steps it
+    passes each press straight on; during a step it counts them, and passes them on when the
+    step ends. Installed once, as a call of signal.signal costs microseconds (a tenth of a step
+    of a few hundred circles): a program that puts in a handler of its own later takes its
+    presses itself."""
 
     def __init__(self):
         self.previous = None  # the handler this one passes presses on to
@@ -299,7 +300,7 @@ class _WholeSteps:
             self.previous(signum, frame)
 
     def __enter__(self):
-        if not self.tried and threading.current_thread() is threading.main_thread():
+        if not self.tried:
             self.tried = True
             previous = signal.getsignal(signal.SIGINT)
             if callable(previous):
@@ -321,16 +322,36 @@ class _WholeSteps:
         return False
 
 
-_whole_steps = _WholeSteps()
+class _AnyThread:
+    """In place of `_WholeSteps` outside the main thread, whose steps a press never interrupts
+    (Python raises KeyboardInterrupt in the main thread only)."""
+
+    def __enter__(self):
+        return self
+
+    def between_steps(self):
+        pass
+
+    def __exit__(self, *exc_info):
+        return False
+
+
+_WHOLE_STEPS = _WholeSteps()
+_ANY_THREAD = _AnyThread()
+
+
+def _whole_steps():
+    """The guard of a call of `advance` or `step` (`_WholeSteps`) in this thread."""
+    return _WHOLE_STEPS if threading.current_thread() is threading.main_thread() else _ANY_THREAD
 
 
 #: Counters of a simulation's work that its copies carry (see `Simulation.copy`).
 WORK_COUNTERS = ("rounds", "sweeps", "cut_steps", "parts_run")
 
 
-def _unpickle(fields, scene, extras):
+def _unpickle(cls, fields, scene, extras):
     """A pickled Simulation (`Simulation.__reduce__`) made again."""
-    return Simulation._from_fields(fields, scene, extras)
+    return cls._from_fields(fields, scene, extras)
 
 
 #: Every Simulation that holds arrays of the running runtime (see `_release_all`).
@@ -724,7 +745,7 @@ class Simulation:
         if not math.isfinite(duration) or duration < 0:
             raise ValueError(f"duration {duration} must be finite and >= 0")
         end = self.time + duration
-        with _whole_steps as steps:
+        with _whole_steps() as steps:
             while self.time < end:
                 h = min(self.dt, end - self.time)
                 self.time += self._step(h)
@@ -743,7 +764,7 @@ class Simulation:
         self._live()
         if int(k) != k or k < 0:
             raise ValueError(f"k = {k} must be a whole number >= 0")
-        with _whole_steps as steps:
+        with _whole_steps() as steps:
             for _ in range(int(k)):
                 done = 0.0
                 while done < self.dt:
@@ -1197,7 +1218,7 @@ class Simulation:
         `copy.deepcopy` make the same (a copy sharing the arrays would be two simulations
         stepping one state)."""
         self._live()
-        return Simulation._from_fields(self._fields(), self.scene, self._extras())
+        return type(self)._from_fields(self._fields(), self.scene, self._extras())
 
     def __copy__(self):
         return self.copy()
@@ -1210,7 +1231,7 @@ class Simulation:
         arrays in the receiving process's runtime (started with arch="auto" unless
         `circles.init` was called there)."""
         self._live()
-        return _unpickle, (self._fields(), self.scene, self._extras())
+        return _unpickle, (type(self), self._fields(), self.scene, self._extras())
 
     def save(self, path) -> Path:
         """Write the state exactly (in the working precision, creation order) to the file `path`
@@ -1239,7 +1260,6 @@ class Simulation:
         """A simulation from a file that `save` wrote: the same state, time and step count, so
         that it goes on as the saved one would have, bit for bit. A file that is not such an
         archive raises ValueError (a missing one FileNotFoundError)."""
-        ensure_init()
         return cls._from_fields(_read_saved(path))
 
     def __repr__(self):

@@ -262,6 +262,9 @@ import numpy as np
 import circles
 from circles import discrete, event
 circles.init(arch="cpu")
+# Python's own handler, which raises KeyboardInterrupt: a process started in the background
+# by a shell inherits SIGINT ignored, and Python then leaves it so.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 scheme, call = sys.argv[3], sys.argv[4]
 scene = circles.Scene(n=400, box=(4.0, 3.0), radius=(0.03, 0.06), seed=13, scheme=scheme)
 sim = circles.Simulation(scene)
