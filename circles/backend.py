@@ -49,7 +49,7 @@ def init(arch: str = "auto", **options) -> str:
         ti.reset()
         _state["initialized"] = False
         raise RuntimeError("arch 'gpu' asked for, but no GPU backend could start: "
-                           "use arch='cpu' or arch='auto'")
+                           "use arch='cpu' or arch='auto' (on the command line, --arch cpu or --arch auto)")
     _state.update(initialized=True, arch=name)
     return name
 

@@ -341,7 +341,7 @@ def _run(scene, options):
     frames = frame_count(options["duration"], options["fps"])
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
-    writer = FrameWriter(options["out"], options["fps"])
+    writer = FrameWriter(options["out"], options["fps"], frames)
     bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
                dynamic_ncols=True, desc="circles")
     stop = _StopRequest()

@@ -2,7 +2,8 @@
 
 ``FrameWriter(path, fps)`` picks the format from the path: ``*.mp4`` is H.264 (yuv420p,
 through imageio-ffmpeg), ``*.gif`` a GIF that loops forever, anything else a folder of
-``frame_00000.png``, ``frame_00001.png``, ... Each frame is encoded and written when it is
+``frame_00000.png``, ``frame_00001.png``, ... (more digits when told of more than 100000
+frames, so that the names sort in frame order) Each frame is encoded and written when it is
 given, so memory does not grow with the length of a run, and ``close()`` (or leaving the
 ``with`` block, also on an exception) finishes the file so that the frames written so far
 play.
@@ -109,11 +110,13 @@ class FrameWriter:
     Args:
       path: ``*.mp4``, ``*.gif``, or a folder for PNG frames.
       fps: frames per second of the video (GIF: at most 50).
+      frames: how many frames will come, when known: PNG names get as many digits as the
+        last frame's number needs (at least 5), so that they sort in frame order.
 
     Use as a context manager, or call ``close()``. ``frames`` counts the frames written.
     """
 
-    def __init__(self, path, fps):
+    def __init__(self, path, fps, frames=None):
         self.path = check_writable(path, fps)
         self.fps = float(fps)
         self.kind = output_kind(self.path)
@@ -121,6 +124,8 @@ class FrameWriter:
         self._shape = None
         self._sink = {"mp4": _Mp4Sink, "gif": _GifSink, "png": _PngSink}[self.kind](
             self.path, self.fps)
+        if self.kind == "png" and frames is not None:
+            self._sink.digits = max(5, len(str(max(int(frames) - 1, 0))))
 
     def write(self, frame):
         """Append one frame: uint8 array (height, width, 3), the same size every time."""
@@ -241,6 +246,7 @@ class _PngSink:
     def __init__(self, path, fps):
         self.path = path
         self._index = 0
+        self.digits = 5
         for old in os.scandir(path):
             if old.is_file() and PNG_PATTERN.fullmatch(old.name):
                 os.unlink(old.path)
@@ -248,7 +254,7 @@ class _PngSink:
     def write(self, frame):
         import imageio.v3 as iio
 
-        iio.imwrite(self.path / f"frame_{self._index:05d}.png", frame,
+        iio.imwrite(self.path / f"frame_{self._index:0{self.digits}d}.png", frame,
                     compress_level=PNG_COMPRESS_LEVEL)
         self._index += 1
 

@@ -88,6 +88,18 @@ def test_png_folder_replaces_the_frames_of_an_earlier_run(tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == ["frame_00000.png", "notes.txt"]
 
 
+def test_png_names_have_the_digits_the_last_frame_needs(tmp_path):
+    """Names sort in frame order: 5 digits up to frame 99999, 6 when told of 100001 frames."""
+    for count, names in ((100_000, ["frame_00000.png", "frame_00001.png"]),
+                         (100_001, ["frame_000000.png", "frame_000001.png"]),
+                         (None, ["frame_00000.png", "frame_00001.png"])):
+        folder = tmp_path / f"frames_{count}"
+        with FrameWriter(folder, FPS, count) as writer:
+            for frame in frames(2):
+                writer.write(frame)
+        assert sorted(p.name for p in folder.iterdir()) == names
+
+
 def test_frames_must_keep_their_size(tmp_path):
     with FrameWriter(tmp_path / "a.gif", FPS) as writer:
         writer.write(frames(1)[0])
