@@ -229,9 +229,9 @@ def test_a_restart_of_the_runtime_leaves_old_simulations_refusing_and_new_ones_e
 @pytest.mark.parametrize("scheme", ["event", "discrete"])
 def test_copies_and_pickles_are_independent_and_go_on_bit_for_bit(circles_cpu, scheme):
     """copy.copy, copy.deepcopy, pickling and Simulation.copy each make a simulation with arrays
-    of its own (before, copy.copy and copy.deepcopy shared the original's arrays, so stepping
-    one moved the other, and pickling failed on a Taichi assertion), which goes on as the
-    original does, event log included."""
+    of its own (before, copy.copy shared the original's arrays, so stepping the copy moved the
+    original, and pickling failed on a Taichi assertion), which goes on as the original does,
+    event log included."""
     import copy
     import pickle
 
