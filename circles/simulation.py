@@ -310,15 +310,23 @@ class _WholeSteps:
         return self
 
     def between_steps(self):
-        """Pass on the presses held during the step that just ended."""
+        """Pass on the presses held during the step that just ended; once one raises (Python's
+        handler does), the others go with it."""
         while self.presses > 0:
             self.presses -= 1
-            self.previous(signal.SIGINT, None)
+            try:
+                self.previous(signal.SIGINT, None)
+            except BaseException:
+                self.presses = 0
+                raise
 
-    def __exit__(self, *exc_info):
+    def __exit__(self, exc_type, exc, tb):
         self.depth -= 1
         if self.depth == 0:
-            self.between_steps()  # presses during a step that raised
+            if exc_type is None:
+                self.between_steps()
+            else:
+                self.presses = 0  # the call is ending with an exception already
         return False
 
 
