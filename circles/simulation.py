@@ -16,6 +16,7 @@ import threading
 import weakref
 import zipfile
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
@@ -749,19 +750,22 @@ class Simulation:
     def advance(self, duration: float):
         """Advance by `duration` of simulated time, ending exactly at the old time + duration."""
         self._live()
+        if isinstance(duration, bool) or not isinstance(duration, Real) or not math.isfinite(duration) \
+                or duration < 0:
+            raise ValueError(f"duration {duration!r} must be a finite number of simulated seconds >= 0")
         duration = float(duration)
-        if not math.isfinite(duration) or duration < 0:
-            raise ValueError(f"duration {duration} must be finite and >= 0")
         end = self.time + duration
         with _whole_steps() as steps:
             while self.time < end:
-                h = min(self.dt, end - self.time)
-                self.time += self._step(h)
+                left = end - self.time
+                h = min(self.dt, left)
+                done = self._step(h)
+                # The last piece ends at `end` itself: time + (end - time) can round a unit
+                # below it, which would cost a step of a unit's length more.
+                self.time = end if done == left else self.time + done
                 self.steps += 1
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
-                if self.time >= end:
-                    self.time = end
                 steps.between_steps()
             self.time = end
         self._check_finite()
@@ -770,8 +774,8 @@ class Simulation:
     def step(self, k: int = 1):
         """Take k steps of length dt."""
         self._live()
-        if int(k) != k or k < 0:
-            raise ValueError(f"k = {k} must be a whole number >= 0")
+        if isinstance(k, bool) or not isinstance(k, Real) or not math.isfinite(k) or int(k) != k or k < 0:
+            raise ValueError(f"k = {k!r} must be a whole number of steps >= 0")
         with _whole_steps() as steps:
             for _ in range(int(k)):
                 done = 0.0

@@ -386,3 +386,21 @@ def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypa
 
     runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_FIRST_IN_PARTS", 40, check)
     assert_runs_equal(runs, boundary, pairs=10000, walls=500)
+
+
+def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
+    """A length that is not a finite number >= 0 (a string, a bool, NaN, infinity, a negative
+    or, for step, a fraction of a step) is refused with the value named, and nothing moves;
+    whole floats and numpy numbers are lengths like any other."""
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(3.0, 2.0), radius=0.08, seed=3))
+    sim.step(2)
+    before = sim.state().pos
+    for bad in ("1", True, float("nan"), float("inf"), -0.5):
+        with pytest.raises(ValueError, match="duration .* must be a finite number of simulated seconds"):
+            sim.advance(bad)
+    for bad in ("2", True, 1.5, -1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="k = .* must be a whole number of steps"):
+            sim.step(bad)
+    assert sim.steps == 2 and np.array_equal(sim.state().pos, before)
+    sim.step(np.int64(1)).step(2.0).advance(np.float32(0.5) * sim.dt)
+    assert sim.steps == 2 + 1 + 2 + 1
