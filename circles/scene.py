@@ -89,6 +89,21 @@ def check_dt(dt):
     return dt
 
 
+#: The largest speed a scene may hold, by precision: sqrt of the largest float over 1000. Times
+#: of impact and kinetic energies square speeds (and differences of velocities, up to twice a
+#: speed), so the squares must stay well inside the range of the arithmetic.
+MAX_SPEED = {"f32": 1.8e16, "f64": 1.3e151}
+
+
+def check_speed(vmax, precision, what="speed"):
+    """Refuse a largest speed `vmax` above MAX_SPEED[precision]."""
+    limit = MAX_SPEED[precision]
+    if not vmax <= limit:
+        raise ValueError(f"{what} {vmax:g} is above {limit:g}, the largest speed {precision} arithmetic holds "
+                         "with room (times of impact and energies square it): measure lengths and times in "
+                         "other units, so that speeds come out smaller")
+
+
 def check_fits(rmax, box, boundary):
     w, h = box
     if boundary == "walls" and 2 * rmax > min(w, h):
@@ -140,6 +155,7 @@ class Scene:
         _choice("boundary", self.boundary, BOUNDARIES)
         _choice("scheme", self.scheme, SCHEMES)
         _choice("precision", self.precision, PRECISIONS)
+        check_speed(vhi, self.precision)
         dt = check_dt(self.dt)
         check_count("seed", self.seed)
         check_fits(rhi, box, self.boundary)

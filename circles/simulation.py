@@ -27,7 +27,7 @@ from .backend import current_arch, ensure_init, on_restart, runtime, serial_loop
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
 from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
-                    check_box, check_count, check_dt, check_fits)
+                    check_box, check_count, check_dt, check_fits, check_speed)
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
 #: cells, and the clusters a split into parts must keep whole, grow with it; a step cut short
@@ -142,12 +142,18 @@ def random_colors(n, rng):
 
 
 def default_dt(scheme, radius, vel):
-    vmax = float(np.sqrt((vel * vel).sum(axis=1)).max()) if len(vel) else 0.0
+    vmax = float(np.hypot(vel[:, 0], vel[:, 1]).max()) if len(vel) else 0.0
     if vmax <= 0:
         return 1.0
     if scheme == "event":
-        return EVENT_STEP_RADII * float(radius.mean()) / vmax
-    return DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
+        dt = EVENT_STEP_RADII * float(radius.mean()) / vmax
+    else:
+        dt = DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
+    if not (0 < dt < math.inf):
+        raise ValueError(f"the largest speed {vmax:g} and the radii (mean {float(radius.mean()):g}) give a step "
+                         f"dt = {dt:g}, which no clock can count: give dt, or measure lengths and times in "
+                         "other units")
+    return dt
 
 
 #: Bytes per circle of the arrays a simulation holds on a CPU, by scheme and precision: the
@@ -262,6 +268,10 @@ def _read_saved(path):
         bad = ~np.isfinite(d[name]) | ((d[name] <= 0) if name in ("radius", "mass") else False)
         if np.any(bad):
             raise refuse(f"its {name} holds {d[name][bad][0]}")
+    try:
+        check_speed(float(np.hypot(d["vel"][:, 0], d["vel"][:, 1]).max(initial=0.0)), str(d["precision"]))
+    except ValueError as error:
+        raise refuse(f"its {error}") from None
     return d
 
 
@@ -425,6 +435,9 @@ class Simulation:
                 raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2) for {n} radii")
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} holds a non-finite value {arr[~np.isfinite(arr)][0]}")
+        speeds = np.hypot(vel[:, 0], vel[:, 1])
+        fastest = int(np.argmax(speeds))
+        check_speed(float(speeds[fastest]), precision, f"the speed of circle {fastest},")
         if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
             raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
         check_fits(float(radius.max()), box, boundary)
@@ -759,6 +772,10 @@ class Simulation:
             while self.time < end:
                 left = end - self.time
                 h = min(self.dt, left)
+                if self.time + h == self.time:
+                    raise ValueError(f"dt = {self.dt:g} is below the resolution of the simulated clock at time "
+                                     f"{self.time:g} ({np.spacing(self.time):g}): the clock would not move; give "
+                                     "a larger dt")
                 done = self._step(h)
                 # The last piece ends at `end` itself: time + (end - time) can round a unit
                 # below it, which would cost a step of a unit's length more.

@@ -404,3 +404,33 @@ def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
     assert sim.steps == 2 and np.array_equal(sim.state().pos, before)
     sim.step(np.int64(1)).step(2.0).advance(np.float32(0.5) * sim.dt)
     assert sim.steps == 2 + 1 + 2 + 1
+
+
+def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circles_cpu):
+    """Speeds whose squares would overflow (in f64 a speed of 1e300 gave a default dt of 0, and
+    advance never ended) are refused before any work, naming the limit; so is an advance whose
+    dt is below the resolution of the simulated clock (time + dt == time would never end)."""
+    from circles.scene import MAX_SPEED
+
+    with pytest.raises(ValueError, match=r"speed 1e\+200 is above 1.3e\+151"):
+        circles_cpu.Scene(n=10, box=(4.0, 3.0), radius=0.1, speed=(1.0, 1e200))
+    with pytest.raises(ValueError, match=r"speed 1e\+17 is above 1.8e\+16, the largest speed f32"):
+        circles_cpu.Scene(n=10, box=(4.0, 3.0), radius=0.1, speed=(1.0, 1e17), precision="f32")
+    pos, radius = np.array([[1.0, 1.0], [3.0, 1.0]]), np.array([0.1, 0.1])
+    for precision, speed in (("f64", 1e300), ("f32", 1e20)):
+        with pytest.raises(ValueError, match=r"the speed of circle 1, .* is above"):
+            circles_cpu.Simulation.from_arrays(pos, np.array([[0.0, 0.0], [0.0, speed]]), radius, box=(4.0, 3.0),
+                                               precision=precision)
+    fast = circles_cpu.Simulation.from_arrays(pos, np.array([[MAX_SPEED["f64"], 0.0], [0.0, 0.0]]), radius,
+                                              box=(4.0, 3.0))
+    assert 0 < fast.dt < 1e-150
+    fast.step(2)
+    energy = fast.stats()["kinetic_energy"]
+    assert energy == pytest.approx(0.5 * 0.1 * MAX_SPEED["f64"] ** 2, rel=1e-12)
+
+    slow_clock = circles_cpu.Simulation.from_arrays(pos, np.array([[1.0, 0.0], [0.0, 0.0]]), radius,
+                                                    box=(4.0, 3.0), dt=1e-12)
+    slow_clock.time = 1e6  # as a loaded long run's: float64 counts 1.2e-10 there
+    with pytest.raises(ValueError, match=r"dt = 1e-12 is below the resolution of the simulated clock"):
+        slow_clock.advance(1.0)
+    assert slow_clock.steps == 0
