@@ -137,6 +137,24 @@ def masses_for(model, radius):
     return mass
 
 
+def check_colors(color, n):
+    """`color` as an (n, 3) uint8 array of 0-255 RGB values; ValueError for anything else (floats
+    in [0, 1], as some libraries write colours, would otherwise truncate to nearly black)."""
+    c = np.asarray(color)
+    if c.shape != (n, 3) or c.dtype == bool or not np.issubdtype(c.dtype, np.number):
+        raise ValueError(f"color has shape {c.shape} and type {c.dtype}, expected ({n}, 3) numbers: one 0-255 "
+                         "RGB triple per circle")
+    whole = np.isfinite(c) & (c >= 0) & (c <= 255) & (c == np.round(c))
+    if not np.all(whole):
+        i = int(np.flatnonzero(~np.all(whole, axis=1))[0])
+        hint = " (for fractions in [0, 1], multiply by 255)" if np.all((c >= 0) & (c <= 1)) else ""
+        raise ValueError(f"color of circle {i}, {c[i].tolist()}, is not three whole numbers from 0 to 255{hint}")
+    if np.issubdtype(c.dtype, np.floating) and c.max() <= 1 and c.max() > 0:
+        raise ValueError("color holds floats from 0 to 1 only, as fractions in [0, 1] would: give 0-255 RGB values "
+                         "(multiply by 255)")
+    return c.astype(np.uint8)
+
+
 def random_colors(n, rng):
     return rng.integers(48, 256, size=(n, 3), dtype=np.uint8)
 
@@ -452,9 +470,7 @@ class Simulation:
                                  f"[0, {w}] x [0, {h}]: move it inside")
         else:
             pos = pos % np.array([w, h])
-        if color is None:
-            color = random_colors(n, np.random.default_rng(0))
-        color = np.asarray(color, dtype=np.uint8).reshape(n, 3)
+        color = random_colors(n, np.random.default_rng(0)) if color is None else check_colors(color, n)
         check_area_fraction(float(np.sum(np.pi * radius ** 2)) / (w * h), n, box)
         sim = cls.__new__(cls)
         sim.scene = None

@@ -168,3 +168,18 @@ def test_from_arrays_shapes_disagree(circles_cpu):
     p, v, r = arrays()
     refused(from_arrays(circles_cpu, vel=v[:3]), number(3), number(4))
     refused(from_arrays(circles_cpu, radius=r[:2]), number(2), number(4))
+
+
+def test_from_arrays_colors_are_0_to_255_rgb(circles_cpu):
+    """Colours are whole numbers from 0 to 255, one RGB triple a circle; fractions in [0, 1]
+    (as some libraries write them) are refused with the fix, where they used to truncate to
+    nearly black, and values past 255 with our message, not numpy's."""
+    rgb = np.array([[10, 20, 30], [255, 0, 0], [0, 128, 0], [7, 7, 7]])
+    made = from_arrays(circles_cpu, color=rgb.astype(np.float64))()
+    assert made.state().color.tolist() == rgb.tolist()
+    refused(from_arrays(circles_cpu, color=rgb / 255.0), r"circle 0", "multiply by 255")
+    refused(from_arrays(circles_cpu, color=np.eye(4, 3)), "from 0 to 1", "multiply by 255")
+    refused(from_arrays(circles_cpu, color=rgb + 250), r"circle 0, \[260", number(255))
+    refused(from_arrays(circles_cpu, color=-rgb), r"circle 0, \[-10", number(255))
+    refused(from_arrays(circles_cpu, color=rgb[:, :2]), r"\(4, 2\)", r"\(4, 3\)")
+    refused(from_arrays(circles_cpu, color=rgb > 9), "bool")
