@@ -429,8 +429,9 @@ def main(argv=None):
     except KeyboardInterrupt:  # before the first frame: nothing written yet
         print("circles: stopped by Ctrl-C", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (FloatingPointError, RuntimeError, OSError) as error:
-        # A broken state, an encoder that quit, a full disk: the frames so far are kept.
+    except (FloatingPointError, RuntimeError, OSError, ValueError) as error:
+        # A broken state, a clock that cannot move, an encoder that quit, a full disk: the
+        # frames so far are kept. (Bad input is a UsageError, raised before the run.)
         print(f"circles: the run failed: {error}", file=sys.stderr)
         return EXIT_FAILED
 

@@ -269,3 +269,35 @@ def test_circle_file_with_flags_overriding_it(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "2 (event, f64, periodic" in result.stdout and "dt <= 0.01 s" in result.stdout
     assert iio.imread(tmp_path / "two.gif", index=None).shape[:3] == (2, 30, 50)
+
+
+FAILING_RUN = """
+import sys
+import circles.simulation as simulation
+from circles import cli
+
+advance = simulation.Simulation.advance
+calls = []
+
+def failing(self, duration):
+    calls.append(1)
+    if len(calls) == 3:
+        raise ValueError("dt = 1e-12 is below the resolution of the simulated clock at time 1e+06")
+    return advance(self, duration)
+
+simulation.Simulation.advance = failing
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_a_run_that_fails_midway_exits_1_and_keeps_its_frames(tmp_path):
+    """An error during the run (here a ValueError from the simulation, which escaped as a
+    traceback before) ends it with status 1 and one line, and the frames made so far play."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([sys.executable, "-c", FAILING_RUN, "run", *SMALL, "--duration", "1", "--fps", "10",
+                             "--out", "run.gif"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    assert "circles: the run failed: dt = 1e-12 is below the resolution" in result.stderr
+    assert iio.imread(tmp_path / "run.gif", index=None).shape[0] == 3
