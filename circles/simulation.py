@@ -155,6 +155,22 @@ def check_colors(color, n):
     return c.astype(np.uint8)
 
 
+def check_circles(pos, vel, radius, precision):
+    """Given circles (`Simulation.from_arrays`, `Simulation.load`): pos and vel (n, 2) and
+    finite, no speed above MAX_SPEED[precision], for n radii that are finite and > 0."""
+    n = radius.shape[0]
+    for name, arr in (("pos", pos), ("vel", vel)):
+        if arr.shape != (n, 2):
+            raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2) for {n} radii")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} holds a non-finite value {arr[~np.isfinite(arr)][0]}")
+    speeds = np.hypot(vel[:, 0], vel[:, 1])
+    fastest = int(np.argmax(speeds))
+    check_speed(float(speeds[fastest]), precision, f"the speed of circle {fastest},")
+    if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
+        raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
+
+
 def random_colors(n, rng):
     return rng.integers(48, 256, size=(n, 3), dtype=np.uint8)
 
@@ -269,7 +285,7 @@ def _read_saved(path):
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:  # a damaged member
             raise refuse(f"numpy cannot read its arrays: {error}") from None
     n = d["radius"].shape[0]
-    for name, shape in (("pos", (n, 2)), ("vel", (n, 2)), ("mass", (n,)), ("color", (n, 3)), ("box", (2,))):
+    for name, shape in (("color", (n, 3)), ("box", (2,))):
         if d[name].shape != shape:
             raise refuse(f"its {name} has shape {d[name].shape}, not {shape}")
     try:
@@ -278,18 +294,12 @@ def _read_saved(path):
         check_box(tuple(d["box"]))
         check_dt(float(d["dt"]))
         check_count("steps", int(d["steps"]))
+        check_circles(d["pos"], d["vel"], d["radius"], str(d["precision"]))
+        masses_for(d["mass"], d["radius"])
     except (ValueError, TypeError) as error:
-        raise refuse(f"its {error}") from None
+        raise refuse(str(error)) from None
     if not (math.isfinite(float(d["time"])) and float(d["time"]) >= 0):
         raise refuse(f"its time {d['time']} is not a finite number >= 0")
-    for name in ("pos", "vel", "radius", "mass"):
-        bad = ~np.isfinite(d[name]) | ((d[name] <= 0) if name in ("radius", "mass") else False)
-        if np.any(bad):
-            raise refuse(f"its {name} holds {d[name][bad][0]}")
-    try:
-        check_speed(float(np.hypot(d["vel"][:, 0], d["vel"][:, 1]).max(initial=0.0)), str(d["precision"]))
-    except ValueError as error:
-        raise refuse(f"its {error}") from None
     return d
 
 
@@ -448,16 +458,7 @@ class Simulation:
         check_memory(n, scheme, precision)
         pos = np.asarray(pos, dtype=np.float64)
         vel = np.asarray(vel, dtype=np.float64)
-        for name, arr in (("pos", pos), ("vel", vel)):
-            if arr.shape != (n, 2):
-                raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2) for {n} radii")
-            if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{name} holds a non-finite value {arr[~np.isfinite(arr)][0]}")
-        speeds = np.hypot(vel[:, 0], vel[:, 1])
-        fastest = int(np.argmax(speeds))
-        check_speed(float(speeds[fastest]), precision, f"the speed of circle {fastest},")
-        if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
-            raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
+        check_circles(pos, vel, radius, precision)
         check_fits(float(radius.max()), box, boundary)
         mass = masses_for("radius" if mass is None else mass, radius)
         w, h = box

@@ -173,7 +173,7 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
     for name, why in (("notes.npz", "not an .npz archive"), ("one.npy", "one array"),
                       ("partial.npz", "lacks radius, mass, color, box"), ("shape.npz", "pos has shape"),
                       ("cut.npz", "not an .npz archive"), ("scheme.npz", "scheme 'magic' is unknown"),
-                      ("radius.npz", "radius holds 0.0"), ("time.npz", "time nan")):
+                      ("radius.npz", "radius 0.0 must be finite and > 0"), ("time.npz", "time nan")):
         with pytest.raises(ValueError, match="not a simulation written by Simulation.save") as refused:
             circles_cpu.Simulation.load(tmp_path / name)
         assert why in str(refused.value) and name in str(refused.value), str(refused.value)
