@@ -3,7 +3,7 @@
 ``FrameWriter(path, fps)`` picks the format from the path: ``*.mp4`` is H.264 (yuv420p,
 through imageio-ffmpeg), ``*.gif`` a GIF that loops forever, anything else a folder of
 ``frame_00000.png``, ``frame_00001.png``, ... (more digits when told of more than 100000
-frames, so that the names sort in frame order) Each frame is encoded and written when it is
+frames, so that the names sort in frame order). Each frame is encoded and written when it is
 given, so memory does not grow with the length of a run, and ``close()`` (or leaving the
 ``with`` block, also on an exception) finishes the file so that the frames written so far
 play.
@@ -122,10 +122,10 @@ class FrameWriter:
         self.kind = output_kind(self.path)
         self.frames = 0
         self._shape = None
-        self._sink = {"mp4": _Mp4Sink, "gif": _GifSink, "png": _PngSink}[self.kind](
-            self.path, self.fps)
-        if self.kind == "png" and frames is not None:
-            self._sink.digits = max(5, len(str(max(int(frames) - 1, 0))))
+        if self.kind == "png":
+            self._sink = _PngSink(self.path, frames)
+        else:
+            self._sink = {"mp4": _Mp4Sink, "gif": _GifSink}[self.kind](self.path, self.fps)
 
     def write(self, frame):
         """Append one frame: uint8 array (height, width, 3), the same size every time."""
@@ -243,10 +243,11 @@ class _PngSink:
     """``frame_00000.png``, ... in a folder; frames of an earlier run there are removed
     first, so the folder holds this run only."""
 
-    def __init__(self, path, fps):
+    def __init__(self, path, frames=None):
         self.path = path
         self._index = 0
-        self.digits = 5
+        # As many digits as the last frame's number needs, when the count is known; at least 5.
+        self.digits = 5 if frames is None else max(5, len(str(max(int(frames) - 1, 0))))
         for old in os.scandir(path):
             if old.is_file() and PNG_PATTERN.fullmatch(old.name):
                 os.unlink(old.path)
