@@ -17,10 +17,15 @@ simulation runs the whole ``duration``; the state at the end is summarised, not 
 makes at most MOST_FRAMES frames (refused before any work beyond that).
 
 Exit status: 0 done; 2 bad input (one line on stderr, before any simulating); 1 the run
-failed; 130 stopped by Ctrl-C, with the frames made so far written and playable.
+failed (one line on stderr; the frames written so far are kept readable, except in an MP4
+that ffmpeg itself could not finish, which is removed); 130 stopped by Ctrl-C, with the
+frames made so far written and playable. A first Ctrl-C stops after the current frame, a
+second at once; neither cuts short the writing of a frame or the finishing of the file.
 """
 
 import argparse
+import contextlib
+import io
 import math
 import os
 import re
@@ -151,6 +156,9 @@ def _read_scene_file(path):
             data = tomllib.load(file)
     except FileNotFoundError:
         raise UsageError(f"scene file {path} not found") from None
+    except UnicodeDecodeError as error:
+        raise UsageError(f"{path}: not UTF-8 text (byte {error.object[error.start]:#04x} at "
+                         f"offset {error.start}): save the scene file as UTF-8") from None
     except OSError as error:
         raise UsageError(f"cannot read scene file {path}: {error.strerror}") from None
     except tomllib.TOMLDecodeError as error:
@@ -286,23 +294,49 @@ def _prepare(argv):
             raise UsageError(f"{where}{error}") from None
     options = _run_options(file_run, args)
     try:
-        options["out"] = check_writable(options["out"], options["fps"])
+        options["out"] = check_writable(options["out"], options["fps"], options["size"])
     except ValueError as error:
         raise UsageError(str(error)) from None
     return scene, options
 
 
 class _StopRequest:
-    """The first Ctrl-C asks to stop after the current frame; a second stops at once."""
+    """The run's SIGINT handler. The first Ctrl-C asks to stop after the current frame; a
+    second stops at once, but only inside `interruptible()` (drawing a frame, simulating
+    to the next): elsewhere, as while a frame is written, the run stops at its next check,
+    so that every frame written is whole. From `finishing()` on (the file is finished, the
+    summary made), Ctrl-C waits, so that the file plays and the summary tells what it holds."""
 
     def __init__(self):
         self.requested = False
+        self._interruptible = False
+        self._finishing = None
+        self._told = False
+
+    @contextlib.contextmanager
+    def interruptible(self):
+        self._interruptible = True
+        try:
+            yield
+        finally:
+            self._interruptible = False
+
+    def finishing(self, path):
+        self._finishing = path
 
     def __call__(self, signum, frame):
-        if self.requested:
+        if self._finishing is not None:
+            if not self._told:
+                self._told = True
+                sys.stderr.write(f"\nfinishing {self._finishing}: a moment (stopping now "
+                                 f"would leave a file that does not play)\n")
+        elif not self.requested:
+            self.requested = True
+            sys.stderr.write("\nstopping after this frame (Ctrl-C again to stop at once)\n")
+        elif self._interruptible:
             raise KeyboardInterrupt
-        self.requested = True
-        sys.stderr.write("\nstopping after this frame (Ctrl-C again to stop at once)\n")
+        else:
+            sys.stderr.write("\nstopping once this frame is written\n")
 
 
 def _simulation(scene):
@@ -327,7 +361,10 @@ def _run(scene, options):
     started = time.perf_counter()
     try:
         threads = options["threads"]
-        arch = circles.init(options["arch"], **({"cpu_max_num_threads": threads} if threads else {}))
+        # ti.init prints "[Taichi] Starting on arch=..." on stdout; the summary names the arch.
+        with contextlib.redirect_stdout(io.StringIO()):
+            arch = circles.init(options["arch"],
+                                **({"cpu_max_num_threads": threads} if threads else {}))
         # Placement can still refuse a scene that passed the checks of Scene, and
         # from_arrays checks what a CircleList leaves to it (such as the area fraction).
         sim = _simulation(scene)
@@ -341,52 +378,65 @@ def _run(scene, options):
     frames = frame_count(options["duration"], options["fps"])
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
-    writer = FrameWriter(options["out"], options["fps"], frames)
-    bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
-               dynamic_ncols=True, desc="circles")
     stop = _StopRequest()
-    interrupted = False
-    previous_handler = signal.getsignal(signal.SIGINT)
+    previous_handler = signal.signal(signal.SIGINT, stop)
     try:
-        signal.signal(signal.SIGINT, stop)
-        for k in range(frames):
-            tick = time.perf_counter()
-            if speed_scale is None:
-                # Fixed for the whole run, so that a colour means one speed in every frame.
-                speed_scale = canvas.speed_scale_of(sim.state().vel)
-            frame = sim.render(width, height, options["color"], speed_scale=speed_scale)
-            clock["render"] += time.perf_counter() - tick
-            tick = time.perf_counter()
-            writer.write(frame)
-            clock["write"] += time.perf_counter() - tick
-            if stop.requested:
-                break
-            tick = time.perf_counter()
-            end = (k + 1) / options["fps"] if k + 1 < frames else options["duration"]
-            sim.advance(end - sim.time)
-            clock["simulate"] += time.perf_counter() - tick
-            bar.update(1)
-            rate = sim.n * sim.steps / max(clock["simulate"], 1e-9)
-            bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
-                                f"{rate:.3g} circle-steps/s", refresh=False)
-            if stop.requested:
-                break
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        signal.signal(signal.SIGINT, previous_handler)
+        writer = FrameWriter(options["out"], options["fps"], frames)
+        bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
+                   dynamic_ncols=True, desc="circles")
+        completed = False  # the whole duration simulated, every frame written
+        failure = None
+        try:
+            for k in range(frames):
+                tick = time.perf_counter()
+                with stop.interruptible():
+                    if speed_scale is None:
+                        # Fixed for the whole run, so that a colour means one speed in every frame.
+                        speed_scale = canvas.speed_scale_of(sim.state().vel)
+                    frame = sim.render(width, height, options["color"], speed_scale=speed_scale)
+                clock["render"] += time.perf_counter() - tick
+                tick = time.perf_counter()
+                writer.write(frame)  # not interruptible: a frame is written whole
+                clock["write"] += time.perf_counter() - tick
+                if stop.requested:
+                    break
+                tick = time.perf_counter()
+                end = (k + 1) / options["fps"] if k + 1 < frames else options["duration"]
+                with stop.interruptible():
+                    sim.advance(end - sim.time)
+                clock["simulate"] += time.perf_counter() - tick
+                completed = k + 1 == frames
+                bar.update(1)
+                rate = sim.n * sim.steps / max(clock["simulate"], 1e-9)
+                bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
+                                    f"{rate:.3g} circle-steps/s", refresh=False)
+                if stop.requested:
+                    break
+        except KeyboardInterrupt:
+            pass  # a second Ctrl-C, while drawing or simulating: every frame written is whole
+        except Exception as error:  # raised once the file is finished
+            failure = error
+        stop.finishing(writer.path)
         bar.close()
         tick = time.perf_counter()
-        writer.close()  # the encoder finishes the frames it still holds
+        try:
+            writer.close()  # the encoder finishes the frames it still holds
+        except OSError as error:
+            if failure is None:
+                raise
+            raise OSError(f"{failure}; then {error}") from failure
         clock["write"] += time.perf_counter() - tick
-    interrupted = interrupted or stop.requested
-    tick = time.perf_counter()
-    stats = sim.stats()
-    stats_s += time.perf_counter() - tick
-    wall_s = time.perf_counter() - started
-    _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
-             interrupted)
-    return EXIT_INTERRUPTED if interrupted else 0
+        if failure is not None:
+            raise failure
+        tick = time.perf_counter()
+        stats = sim.stats()
+        stats_s += time.perf_counter() - tick
+        wall_s = time.perf_counter() - started
+        _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
+                 not completed)
+    finally:
+        signal.signal(signal.SIGINT, previous_handler)
+    return 0 if completed else EXIT_INTERRUPTED
 
 
 def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
@@ -409,7 +459,8 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
         ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
-        ("wrote", f"{writer.path} ({writer.frames} frame{'s' if writer.frames != 1 else ''} at {writer.fps:g} fps)"),
+        ("wrote", f"{writer.path} ({writer.frames} frame{'s' if writer.frames != 1 else ''} at {writer.fps:g} fps)"
+                  if writer.frames else "nothing: stopped before the first frame was written"),
     ]
     for name, text in lines:
         print(f"{name:<11} {text}")
@@ -426,7 +477,7 @@ def main(argv=None):
         return EXIT_BAD_INPUT
     except SystemExit as exit_:  # --help
         return exit_.code if isinstance(exit_.code, int) else 0
-    except KeyboardInterrupt:  # before the first frame: nothing written yet
+    except KeyboardInterrupt:  # before the frames began (placement): nothing written yet
         print("circles: stopped by Ctrl-C", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (FloatingPointError, RuntimeError, OSError, ValueError) as error:

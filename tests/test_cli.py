@@ -23,8 +23,9 @@ SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1
          "--size", "80x60", "--arch", "cpu"]
 
 
-def run_cli(args, cwd, **options):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+def run_cli(args, cwd, extra_env=None, **options):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           **(extra_env or {})}
     return subprocess.run([sys.executable, "-m", "circles.cli", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=120, **options)
 
@@ -40,6 +41,7 @@ def test_run_writes_a_gif_of_duration_times_fps_frames(tmp_path):
                  "overlap", "run.gif"):
         assert word in summary
     assert "simulated   0.5 s" in summary
+    assert "Starting on arch" not in summary  # ti.init's line: the summary names the arch
 
 
 def test_scene_file_with_flags_overriding_it(tmp_path):
@@ -98,6 +100,15 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     (["fly"], ["fly"]),
     (["run", "missing.toml"], ["missing.toml", "not found"]),
     (["run", "--out", "run.gif", "--fps", "60"], ["GIF", "50"]),
+    # A GIF delay is two bytes of hundredths of a second: at most 655.35 s a frame.
+    (["run", "--out", "run.gif", "--fps", "0.001"], ["GIF", "0.001", "100/65535", "--fps 0.00153"]),
+    # ffmpeg takes the rate as a fraction of numbers up to 1001000, and the mp4 muxer a
+    # frame's duration in 32 bits (see circles.video).
+    (["run", "--out", "run.mp4", "--fps", "1e-9"], ["MP4", "1e-09", "0.0001", "--fps", "PNG"]),
+    (["run", "--out", "run.mp4", "--fps", "2e6", "--duration", "1e-6"],
+     ["MP4", "2e+06", "1000000", "--fps"]),
+    (["run", "--out", "run.mp4", "--size", "65x37"], ["MP4", "even", "65x37", "64x36 or 66x38", ".gif"]),
+    (["run", "--out", "run.mp4", "--size", "16384x16384"], ["MP4", "16384x16384", "2**28", "--size"]),
     # A mistyped duration: 3e13 frames would fill the disk, and listing them the memory.
     (["run", "--duration", "1e12"], ["1e+12", "3e+13 frames", "1000000", "--duration", "--fps"]),
     (["run", "--duration", "1e300", "--fps", "1e300"], ["1e+300", "more frames than a float holds"]),
@@ -118,8 +129,9 @@ def test_bad_scene_file_values_exit_2(tmp_path, capsys, monkeypatch):
     Path("bad.toml").write_text('n = 10\nscheme = "magic"\n')
     Path("broken.toml").write_text('n = = 3\n')
     Path("run_key.toml").write_text('n = 10\n[run]\nspeed = 3\n')
+    Path("utf16.toml").write_bytes('n = 10\n'.encode("utf-16"))  # starts \xff\xfe
     for name, word in (("bad.toml", "magic"), ("broken.toml", "TOML"),
-                       ("run_key.toml", "unknown [run] key")):
+                       ("run_key.toml", "unknown [run] key"), ("utf16.toml", "not UTF-8")):
         assert cli.main(["run", name]) == 2
         error = capsys.readouterr().err.strip()
         assert len(error.splitlines()) == 1 and name in error and word in error
@@ -144,6 +156,13 @@ def test_unwritable_output_is_refused_before_simulating(tmp_path, capsys, monkey
 def test_help_exits_0(capsys):
     assert cli.main(["run", "--help"]) == 0
     assert "--radius" in capsys.readouterr().out
+
+
+def test_version_prints_its_line_only(tmp_path):
+    """Nothing but the version on stdout (no banner of Taichi's when it is imported)."""
+    result = run_cli(["--version"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == [cli.version_text()]
 
 
 def test_version_names_the_package_and_what_it_runs_on(capsys):
@@ -301,3 +320,103 @@ def test_a_run_that_fails_midway_exits_1_and_keeps_its_frames(tmp_path):
     assert "Traceback" not in result.stderr
     assert "circles: the run failed: dt = 1e-12 is below the resolution" in result.stderr
     assert iio.imread(tmp_path / "run.gif", index=None).shape[0] == 3
+
+
+CTRL_C_RUN = """
+import os
+import signal
+import sys
+
+from circles import cli, video
+
+# As in a terminal: a shell that starts a job in the background leaves SIGINT ignored.
+signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def ctrl_c(times):
+    for _ in range(times):
+        os.kill(os.getpid(), signal.SIGINT)  # handled before the next line runs
+
+
+write, close = video.FrameWriter.write, video.FrameWriter.close
+
+
+def write_with_ctrl_c(self, frame):
+    if self.frames == {at_frame}:
+        ctrl_c(2)  # twice, as the frame is written
+    write(self, frame)
+
+
+def close_with_ctrl_c(self):
+    if {at_close}:
+        ctrl_c(2)  # twice, as the file is finished
+    close(self)
+
+
+video.FrameWriter.write = write_with_ctrl_c
+video.FrameWriter.close = close_with_ctrl_c
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def run_with_ctrl_c(args, cwd, at_frame=-1, at_close=False):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    script = CTRL_C_RUN.format(at_frame=at_frame, at_close=at_close)
+    return subprocess.run([sys.executable, "-c", script, *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+def frames_in(path):
+    if path.is_dir():
+        names = sorted(p.name for p in path.iterdir())
+        assert names == [f"frame_{k:05d}.png" for k in range(len(names))]
+        return np.stack([iio.imread(path / name) for name in names])
+    return iio.imread(path, index=None)
+
+
+@pytest.mark.parametrize("out", ["run.mp4", "frames"])
+def test_ctrl_c_twice_while_a_frame_is_written_keeps_it_whole(tmp_path, out):
+    """"Stop at once" stops the run, but not the writing of a frame (which, cut short, broke
+    the MP4's encoder or left a truncated PNG): the third frame, during whose writing both
+    Ctrl-Cs come, is the last, whole, and counted."""
+    result = run_with_ctrl_c(["run", *SMALL, "--duration", "1", "--fps", "10", "--out", out],
+                             tmp_path, at_frame=2)
+    assert result.returncode == 130, result.stderr
+    assert "Traceback" not in result.stderr
+    assert "(stopped by Ctrl-C)" in result.stdout
+    assert f"wrote       {out} (3 frames at 10 fps)" in result.stdout
+    assert frames_in(tmp_path / out).shape[:3] == (3, 60, 80)
+
+
+def test_ctrl_c_while_the_file_is_finished_waits_for_it(tmp_path):
+    """Ctrl-C as the MP4 is finished (it killed ffmpeg, leaving a file that did not play, and
+    lost the summary) waits for the file: the run was complete, so the status is 0."""
+    result = run_with_ctrl_c(["run", *SMALL, "--duration", "0.5", "--fps", "10",
+                              "--out", "run.mp4"], tmp_path, at_close=True)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr and "finishing run.mp4" in result.stderr
+    assert "simulated   0.5 s in" in result.stdout and "Ctrl-C" not in result.stdout
+    assert "wrote       run.mp4 (5 frames at 10 fps)" in result.stdout
+    assert frames_in(tmp_path / "run.mp4").shape[:3] == (5, 60, 80)
+
+
+def test_an_encoder_that_fails_exits_1_with_one_line_and_no_broken_file(tmp_path):
+    """ffmpeg killed for the size of its file (as by `ulimit -f`; it was reported as written,
+    status 0) ends the run with status 1 and one line, and the unplayable file is removed."""
+    import imageio_ffmpeg
+
+    script = tmp_path / "limited_ffmpeg"
+    script.write_text(f"#!{sys.executable}\n"
+                      "import os, resource, signal, sys\n"
+                      "resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000))\n"
+                      "signal.signal(signal.SIGXFSZ, signal.SIG_DFL)  # as a shell leaves it\n"
+                      f"os.execv({imageio_ffmpeg.get_ffmpeg_exe()!r}, ['ffmpeg', *sys.argv[1:]])\n")
+    script.chmod(0o755)
+    result = run_cli(["run", *SMALL, "--duration", "0.5", "--fps", "10", "--out", "run.mp4"],
+                     tmp_path, extra_env={"IMAGEIO_FFMPEG_EXE": str(script)})
+    assert result.returncode == 1, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("circles: the run failed: ffmpeg failed to write run.mp4")
+    assert "SIGXFSZ" in lines[0] and "removed the file" in lines[0]
+    assert "wrote" not in result.stdout and not (tmp_path / "run.mp4").exists()

@@ -1,12 +1,16 @@
 """Frame writers: every format gives back the frames written, at their size, in order."""
 
+import os
+import resource
 import sys
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from circles.video import FrameWriter, OutputError, check_writable, output_kind
+from circles import video
+from circles.video import FrameWriter, OutputError, WriteError, check_writable, output_kind
 
 FPS = 10
 
@@ -48,12 +52,130 @@ def test_writer_gives_back_every_frame_at_its_size(tmp_path, name):
         assert (got == np.stack(written)).all()
 
 
-def test_mp4_with_odd_size_is_padded_to_even(tmp_path):
+def test_mp4_with_odd_size_is_refused_not_padded(tmp_path):
+    """yuv420p needs even sides: an odd frame is refused (padding it would change the size
+    and repeat the edge pixels), with the even sizes near it; GIF and PNG keep any size."""
+    with pytest.raises(OutputError, match="not 95x63: use --size 94x62 or 96x64"):
+        check_writable(tmp_path / "odd.mp4", FPS, (95, 63))
     path = tmp_path / "odd.mp4"
     with FrameWriter(path, FPS) as writer:
-        for frame in frames(3, 63, 95):
+        with pytest.raises(OutputError, match="even width and height"):
+            writer.write(frames(1, 63, 95)[0])
+    assert not path.exists()
+    for name in ("odd.gif", "odd_frames"):
+        with FrameWriter(tmp_path / name, FPS) as writer:
+            for frame in frames(2, 63, 95):
+                writer.write(frame)
+        assert read_back(tmp_path / name).shape == (2, 63, 95, 3)
+
+
+def test_mp4_size_limit_is_ffmpegs(tmp_path):
+    """ffmpeg refuses a picture unless (w + 128) * (h + 128) < 2**28: 16384x16128 is the
+    tallest at width 16384 (both measured with ffmpeg); the refusal names a size that fits."""
+    path = tmp_path / "big.mp4"
+    assert (16384 + 128) * (16128 + 128) < 2**28 <= (16384 + 128) * (16130 + 128)
+    check_writable(path, FPS, (16384, 16128))
+    check_writable(path, FPS, (16128, 16384))
+    for size in ((16384, 16130), (16256, 16256), (16384, 16384)):
+        with pytest.raises(OutputError, match=r"below 2\*\*28") as error:
+            check_writable(path, FPS, size)
+        fit = error.value.args[0].split("--size ")[1].split(" ")[0]
+        check_writable(path, FPS, tuple(map(int, fit.split("x"))))  # the size named fits
+    check_writable(tmp_path / "big.gif", FPS, (16384, 16384))  # a GIF takes it
+
+
+def test_mp4_frame_rate_limits(tmp_path):
+    """The lowest and highest MP4 rates encode every frame (the moving square: B-frames,
+    the case that fails first at low rates), and the lowest keeps its timing: 7 frames at
+    1e-4 per second last 70000 s. Just beyond either, the rate is refused."""
+    written = frames()
+    for fps in (video.MP4_MIN_FPS, video.MP4_MAX_FPS):
+        path = tmp_path / f"{fps:g}.mp4"
+        with FrameWriter(path, fps) as writer:
+            for frame in written:
+                writer.write(frame)
+        assert read_back(path).shape == (len(written), 64, 96, 3)
+        if fps == video.MP4_MIN_FPS:
+            assert iio.immeta(path)["duration"] == pytest.approx(len(written) / fps)
+    with pytest.raises(OutputError, match="at least 0.0001 frames per second"):
+        check_writable(tmp_path / "slow.mp4", video.MP4_MIN_FPS * 0.99)
+    with pytest.raises(OutputError, match="at most 1000000 frames per second"):
+        check_writable(tmp_path / "fast.mp4", video.MP4_MAX_FPS * 1.01)
+
+
+def limited_ffmpeg(tmp_path, size_limit):
+    """An ffmpeg that may write files of at most `size_limit` bytes: it fails as on a full disk."""
+    import imageio_ffmpeg
+
+    script = tmp_path / "limited_ffmpeg"
+    script.write_text(f"#!{sys.executable}\n"
+                      "import os, resource, sys\n"
+                      f"resource.setrlimit(resource.RLIMIT_FSIZE, ({size_limit}, {size_limit}))\n"
+                      f"os.execv({imageio_ffmpeg.get_ffmpeg_exe()!r}, ['ffmpeg', *sys.argv[1:]])\n")
+    script.chmod(0o755)
+    return script
+
+
+def test_mp4_encoder_failure_is_one_line_and_leaves_no_broken_file(tmp_path, monkeypatch):
+    """ffmpeg that cannot write its file (here at most 2000 bytes, then "File too large")
+    fails the writer with ffmpeg's own reason in one line, and the file, which would not
+    play, is removed."""
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(limited_ffmpeg(tmp_path, 2000)))
+    noise = np.random.default_rng(1).integers(0, 256, (3, 64, 96, 3), dtype=np.uint8)
+    path = tmp_path / "full.mp4"
+    writer = FrameWriter(path, FPS)
+    with pytest.raises(WriteError) as error:
+        for frame in noise:  # incompressible: more than 2000 bytes of video
             writer.write(frame)
-    assert read_back(path).shape == (3, 64, 96, 3)
+        writer.close()
+    message = str(error.value)
+    assert "\n" not in message and "full.mp4" in message and "File too large" in message
+    assert "removed the file" in message and not path.exists()
+    writer.close()  # closed already: nothing more to do
+
+
+@pytest.mark.parametrize("room, words", [
+    (16, "keeps those 3 and plays"),
+    (0, "keeps those 3, but its last byte could not be written"),
+])
+def test_gif_write_failure_keeps_the_frames_before_readable(tmp_path, room, words):
+    """A write that fails midway through a frame (the file may grow by `room` bytes only, as
+    on a full disk) cuts the GIF back to its last whole frame and ends it there."""
+    path = tmp_path / "full.gif"
+    written = frames(4)
+    writer = FrameWriter(path, FPS)
+    for frame in written[:3]:
+        writer.write(frame)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (path.stat().st_size + room, hard))
+    try:
+        with pytest.raises(WriteError, match=f"beyond 3 frames \\(File too large\\): the file {words}"):
+            writer.write(written[3])
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    writer.close()
+    assert writer.frames == 3
+    assert (read_back(path) == np.stack(written[:3])).all()
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt(), OSError(28, "No space left on device")])
+def test_a_png_frame_is_whole_or_absent(tmp_path, monkeypatch, stop):
+    """A frame whose writing stops midway (Ctrl-C, a full disk) leaves no file behind."""
+    folder = tmp_path / "frames"
+    writer = FrameWriter(folder, FPS)
+    writer.write(frames(1)[0])
+
+    def stopped(uri, image, **kwargs):
+        Path(uri).write_bytes(b"\x89PNG\r\n\x1a\n")  # the start of a frame, then the stop
+        raise stop
+
+    monkeypatch.setattr(iio, "imwrite", stopped)
+    with pytest.raises(type(stop)) as error:
+        writer.write(frames(2)[1])
+    if isinstance(stop, OSError):
+        assert "No space left on device" in str(error.value)
+        assert "holds the 1 frame before it" in str(error.value)
+    assert os.listdir(folder) == ["frame_00000.png"]
 
 
 def test_gif_loops_and_keeps_the_frame_rate(tmp_path):
@@ -145,6 +267,15 @@ def test_check_makes_folders_and_leaves_no_file(tmp_path):
 def test_gif_frame_rate_is_limited(tmp_path):
     with pytest.raises(OutputError, match="50"):
         check_writable(tmp_path / "fast.gif", 60)
+    # A delay of 65535 hundredths of a second is the longest the GIF's two bytes hold.
+    with pytest.raises(OutputError, match=r"at least 100/65535 = 0.001526 .* --fps 0.00153"):
+        check_writable(tmp_path / "slow.gif", 0.0015)
+    path = tmp_path / "slowest.gif"
+    with FrameWriter(path, video.GIF_MIN_FPS) as writer:
+        for frame in frames(2):
+            writer.write(frame)
+    assert iio.immeta(path, index=0)["duration"] == 655350  # milliseconds, exactly
+    assert read_back(path).shape == (2, 64, 96, 3)
 
 
 def test_mp4_without_imageio_ffmpeg_says_what_to_install(tmp_path, monkeypatch):
