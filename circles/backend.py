@@ -1,6 +1,8 @@
 """Taichi runtime set-up: `circles.init` wraps `ti.init`; nothing here runs at import."""
 from __future__ import annotations
 
+import difflib
+
 import taichi as ti
 
 ARCHES = ("auto", "cpu", "gpu")
@@ -29,6 +31,7 @@ def init(arch: str = "auto", **options) -> str:
     """
     if arch not in ARCHES:
         raise ValueError(f"arch {arch!r} is unknown: use one of {', '.join(ARCHES)}")
+    _check_options(options)
     options.setdefault("log_level", ti.ERROR)
     # No reassociation of floating-point arithmetic: pair arithmetic must round the same way
     # whichever circle of a pair comes first, so results do not depend on memory order.
@@ -38,6 +41,7 @@ def init(arch: str = "auto", **options) -> str:
             hook()
         ti.reset()
     _state["runtime"] += 1  # the arrays of every earlier runtime are gone (`runtime`)
+    _state.update(initialized=False, arch=None)  # until ti.init succeeds: the next use starts anew
     if arch == "cpu":
         ti.init(arch=ti.cpu, **options)
     else:
@@ -52,6 +56,38 @@ def init(arch: str = "auto", **options) -> str:
                            "use arch='cpu' or arch='auto' (on the command line, --arch cpu or --arch auto)")
     _state.update(initialized=True, arch=name)
     return name
+
+
+#: ti.init's own options besides the fields of its compile configuration (`ti.cfg`).
+_INIT_OPTIONS = ("log_level", "gdb_trigger", "short_circuit_operators", "print_full_traceback", "unrolling_limit",
+                 "default_fp", "default_ip", "require_version")
+
+
+_KINDS = {"int": "a whole number", "float": "a number", "bool": "True or False", "str": "a string"}
+
+
+def _check_options(options):
+    """Refuse options that ti.init would refuse, before the runtime is touched: ti.init stops the
+    running one first and then fails, and a runtime started after such a failure has crashed
+    the process (Taichi 1.7). Names it does not know, and values that its configuration's fields
+    do not take (each tried on a configuration of its own, converted as ti.init converts it)."""
+    scratch = ti._lib.core.CompileConfig()
+    fields = {k for k in dir(scratch) if not k.startswith("_")} - {"arch", "default_up"}
+    known = fields | set(_INIT_OPTIONS)
+    for name, value in options.items():
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            hint = f"did you mean {close[0]}? " if close else ""
+            raise ValueError(f"circles.init: option {name!r} is not one that ti.init takes: {hint}see ti.init's "
+                             "documentation for its options (for example cpu_max_num_threads)")
+        if name in fields and name not in ("default_fp", "default_ip"):
+            convert = type(getattr(scratch, name))
+            try:
+                setattr(scratch, name, value if convert is bool else convert(value))
+            except (TypeError, ValueError):
+                raise ValueError(f"circles.init: option {name} = {value!r} is not a value ti.init takes: give "
+                                 f"{_KINDS.get(convert.__name__, convert.__name__)}, as its default "
+                                 f"{getattr(scratch, name)!r} is") from None
 
 
 def ensure_init() -> str:

@@ -54,6 +54,7 @@ stages'. Nothing here calls ``ti.init``: the caller does (``circles.init()``).
 """
 
 import math
+from numbers import Real
 
 import numpy as np
 import taichi as ti
@@ -800,8 +801,10 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
     speed_mode = color_mode == "speed"
     if speed_scale is None:
         speed_scale = speed_scale_of(vel) if speed_mode else 1.0
-    if not (speed_scale > 0 and math.isfinite(speed_scale)):
-        raise ValueError(f"speed_scale {speed_scale!r} must be positive and finite")
+    if isinstance(speed_scale, bool) or not isinstance(speed_scale, Real) or not (
+            speed_scale > 0 and math.isfinite(speed_scale)):
+        raise ValueError(f"speed_scale {speed_scale!r} must be a positive finite number (the speed at the top of "
+                         "the colormap), or None for twice the rms speed")
     periodic = bool(periodic)
 
     image = np.empty((height, width, 3), dtype=np.uint8)

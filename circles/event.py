@@ -822,8 +822,16 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
 QUEUE_BUCKET_CIRCLES = 4
 #: A step that executes more events than this per circle (the queue: at most 2**30 in all) stops
 #: with an error, on the queue and in the rounds: circles jammed in a chain across the box
-#: collide without end at one instant.
+#: collide without end at one instant. Every step may execute MOST_EVENTS_ANY_STEP, so that a few
+#: circles can make many collisions of their own in a step (a circle 1e10 times as heavy as a light
+#: one pressing it against a wall makes 314159).
 MOST_EVENTS_PER_CIRCLE = 10_000
+MOST_EVENTS_ANY_STEP = 1_000_000
+
+
+def most_events(n):
+    """The events a step of n circles may execute before it stops as jammed (see above)."""
+    return min(max(n * MOST_EVENTS_PER_CIRCLE, MOST_EVENTS_ANY_STEP), 1 << 30)
 #: head[b] of a bucket already poured into the heap: its events go to the heap directly.
 POURED = -2
 
@@ -1168,7 +1176,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                 size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, 0, 0)
         # Circles jammed in a chain that spans the box, with velocities, collide without end
         # at one instant; no physical step comes near this many events.
-        most = ti.cast(ti.min(ti.cast(n, ti.i64) * MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
+        most = ti.cast(ti.min(ti.max(ti.cast(n, ti.i64) * MOST_EVENTS_PER_CIRCLE, MOST_EVENTS_ANY_STEP), 1 << 30),
+                       ti.i32)
         reached, horizon = _drain(size, horizon, horizon, reached, most, scale, nb, 0, 0, queue,
                                   (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
                                   (pair_count, virial, wall_count, wall_impulse),

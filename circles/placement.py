@@ -62,7 +62,7 @@ import taichi as ti
 
 from .geometry import cell_index, displacement, neighbour_range
 from .grid import Grid, prefix_sum
-from .scene import DENSEST_PACKING
+from .scene import DENSEST_PACKING, PLACE_CLEARANCE
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -70,8 +70,9 @@ ndarr = ti.types.ndarray(ndim=1)
 RSA_LIMIT = 0.35
 #: Area fraction up to which a filled lattice with its overlaps removed is used (the fluid).
 FILL_LIMIT = 0.70
-#: Placed circles keep this relative clearance, so rounding never makes an overlap.
-CLEARANCE = 1e-6
+#: Placed circles keep this relative clearance, so rounding never makes an overlap (a walled
+#: scene is checked to leave room for it, `scene.check_room`).
+CLEARANCE = PLACE_CLEARANCE
 #: Size classes of random sequential addition: radii in (r / CLASS_RATIO, r] go together.
 CLASS_RATIO = 2.0
 #: Each circle of the filled lattice starts uniform over this many bricks along each axis.
@@ -199,6 +200,15 @@ def _settle(pos: ndarr, radius: ndarr, placed: ndarr, proposing: ndarr, cell_of:
     return accepted
 
 
+def seed_key(seed: int) -> int:
+    """The 31-bit key of the placement's hash for a seed >= 0: the seed itself below 2**31, else
+    a key drawn from all of its bits (so that seeds that differ only above bit 31 place apart)."""
+    seed = int(seed)
+    if seed < 1 << 31:
+        return seed
+    return int(np.random.SeedSequence(seed).generate_state(1, np.uint32)[0]) & 0x7FFFFFFF
+
+
 def random_sequential(radius: np.ndarray, box, periodic: bool, seed: int, max_rounds: int = 400,
                       single: bool = False):
     """Positions (n, 2) float64 by parallel random sequential addition, or None if it jams.
@@ -216,7 +226,7 @@ def random_sequential(radius: np.ndarray, box, periodic: bool, seed: int, max_ro
     reach = 2.0 * float(radius.max()) * (1.0 + 2 * CLEARANCE)
     unplaced = np.ones(n, bool)
     draw = 0
-    seed32 = int(seed) & 0x7FFFFFFF
+    seed32 = seed_key(seed)
     rounds = 0
     while unplaced.any():
         # The class of the largest unplaced circle, and how many circles it holds.

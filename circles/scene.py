@@ -115,10 +115,35 @@ def check_fits(rmax, box, boundary):
                          "use smaller circles or a bigger box")
 
 
+#: Circles placed at random keep this relative clearance from each other and from the walls
+#: (`placement.CLEARANCE`), so that rounding their places never makes an overlap.
+PLACE_CLEARANCE = 1e-6
+
+
+def check_room(rmax, box, boundary, precision):
+    """Refuse a walled scene whose largest circle leaves no room to place it at random: its
+    diameter with the placement's clearance (twice PLACE_CLEARANCE of it) and the rounding of a
+    place in the precision (`placement.rounding_margin`, at each wall) must fit the smaller side."""
+    w, h = box
+    eps = 2.0 ** -24 if precision == "f32" else 2.0 ** -53
+    rounding = 4.0 * max(box) * eps
+    if boundary == "walls" and 2 * rmax * (1 + 2 * PLACE_CLEARANCE) + 2 * rounding > min(w, h):
+        most = (min(w, h) - 2 * rounding) / (2 * (1 + 2 * PLACE_CLEARANCE))
+        most = float(f"{most * (1 - 1e-8):.9g}")  # printed below the limit, not rounded above it
+        raise ValueError(f"radius {rmax} leaves no room to place the circle at random in the box {w} x {h} (its "
+                         f"diameter, with a clearance of {2 * PLACE_CLEARANCE:g} of it for rounding, must fit the "
+                         f"side {min(w, h)}): use a radius of at most {most:.9g}, a bigger box, or give the places "
+                         "yourself with Simulation.from_arrays")
+
+
 def check_area_fraction(fraction, n, box):
     if fraction > DENSEST_PACKING:
-        raise ValueError(f"area fraction {fraction:.4f} of {n} circles in a {box[0]} x {box[1]} box exceeds "
-                         f"the densest packing {DENSEST_PACKING:.4f}: use fewer or smaller circles or a bigger box")
+        digits = 4  # as many as show the two apart
+        while f"{fraction:.{digits}f}" == f"{DENSEST_PACKING:.{digits}f}" and digits < 17:
+            digits += 1
+        raise ValueError(f"area fraction {fraction:.{digits}f} of {n} circles in a {box[0]} x {box[1]} box "
+                         f"exceeds the densest packing {DENSEST_PACKING:.{digits}f}: use fewer or smaller circles "
+                         "or a bigger box")
 
 
 @dataclass(frozen=True)
@@ -159,6 +184,7 @@ class Scene:
         dt = check_dt(self.dt)
         check_count("seed", self.seed)
         check_fits(rhi, box, self.boundary)
+        check_room(rhi, box, self.boundary, self.precision)
         check_area_fraction(self.expected_area_fraction_of(self.n, box, rlo, rhi), self.n, box)
         object.__setattr__(self, "n", int(self.n))
         object.__setattr__(self, "box", box)

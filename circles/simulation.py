@@ -73,7 +73,7 @@ BACKUP_ORDER = ("pos", "vel", "tau", "pair_count", "virial", "wall_count", "wall
 MOST_WINDOWS = 8
 WINDOW_RETRY_STEPS = 16
 #: Rounds of one event step after which (and after twice as many, and so on) the events it
-#: executed are counted: more than event.MOST_EVENTS_PER_CIRCLE per circle stop it with an
+#: executed are counted: more than `event.most_events` stop it with an
 #: error (jammed circles), as on the queue. A step takes about ten rounds.
 JAM_CHECK_ROUNDS = 64
 #: Sweeps of the causal bound per round before giving up (it settles in a few).
@@ -137,6 +137,34 @@ def masses_for(model, radius):
     return mass
 
 
+#: The largest ratio of two circles' masses each precision carries. The kernels hold inverse
+#: masses in a unit of mass of their own (`mass_unit`, a power of two near the middle of the
+#: masses, so the scaling is exact and the motion is that of the masses as given), so only the
+#: ratio is bounded: inverse masses then stay normal numbers, and impulses (a mass in that unit
+#: times a speed up to MAX_SPEED) stay finite, with a factor of 1000 to spare in float32.
+MAX_MASS_RATIO = {"f32": 1e36, "f64": 1e300}
+
+
+def check_mass_ratio(mass, precision):
+    """Refuse masses whose largest and least differ by more than MAX_MASS_RATIO[precision]."""
+    heavy, light = int(np.argmax(mass)), int(np.argmin(mass))
+    ratio = float(mass[heavy]) / float(mass[light])
+    if not ratio <= MAX_MASS_RATIO[precision]:
+        raise ValueError(f"circle {heavy} (mass {mass[heavy]:g}) is {ratio:.3g} times as heavy as circle {light} "
+                         f"(mass {mass[light]:g}), more than the {MAX_MASS_RATIO[precision]:g} that {precision} "
+                         "arithmetic carries: bring the masses closer"
+                         + (", or use precision 'f64'" if precision == "f32" else ""))
+
+
+def mass_unit(mass):
+    """The unit of mass of the kernels' inverse masses (and of the impulses they sum): the power
+    of two nearest the geometric mean of the least and largest mass. Scaling by a power of two
+    is exact, so velocities come out bit for bit as with the masses as given wherever those
+    fit the precision, and masses of any magnitude fit (`MAX_MASS_RATIO`)."""
+    lo, hi = float(np.min(mass)), float(np.max(mass))
+    return 2.0 ** round(0.5 * (math.log2(lo) + math.log2(hi)))
+
+
 def check_colors(color, n):
     """`color` as an (n, 3) uint8 array of 0-255 RGB values; ValueError for anything else (floats
     in [0, 1], as some libraries write colours, would otherwise truncate to nearly black)."""
@@ -171,6 +199,39 @@ def check_circles(pos, vel, radius, precision):
         raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
 
 
+def check_placed(pos, radius, box, boundary, slack):
+    """Given places for the radii: the largest circle fits the box, the circles' area fits the
+    densest packing, and in a walled box every circle lies inside the walls, or crosses one by
+    at most `slack` (a length)."""
+    n = radius.shape[0]
+    check_fits(float(radius.max()), box, boundary)
+    w, h = box
+    check_area_fraction(float(np.sum(np.pi * radius ** 2)) / (w * h), n, box)
+    if boundary == "walls":
+        lo, hi = radius - slack, np.array(box) - radius[:, None] + slack
+        out = np.any((pos < lo[:, None]) | (pos > hi), axis=1)
+        if np.any(out):
+            i = int(np.flatnonzero(out)[0])
+            at = tuple(float(x) for x in pos[i])
+            raise ValueError(f"circle {i} at {at} with radius {radius[i]} is not inside the walls "
+                             f"[0, {w}] x [0, {h}]: move it inside")
+
+
+def place_slack(precision, box):
+    """How far a stored place can lie from where exact arithmetic puts it: 8 units in the last
+    place of the box's larger side in the precision (float32 stores a place in a box of side L
+    to within about 6e-8 L)."""
+    return 8.0 * float(np.finfo(_NP_REAL[precision]).eps) * max(box)
+
+
+def overlap_tolerance(precision, box, radius):
+    """The overlap, as a fraction of the contact distance, up to which given circles count as in
+    contact: INPUT_OVERLAP_TOLERANCE, plus what storing their places can make of a contact
+    (`place_slack` over the least contact distance: in float32, touching circles given in
+    float64 come out overlapping by up to that)."""
+    return INPUT_OVERLAP_TOLERANCE + place_slack(precision, box) / (2.0 * float(radius.min()))
+
+
 def random_colors(n, rng):
     return rng.integers(48, 256, size=(n, 3), dtype=np.uint8)
 
@@ -195,6 +256,12 @@ def default_dt(scheme, radius, vel):
 #: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds 61 bytes a
 #: circle more in f32, 81 in f64.
 ARRAY_BYTES = {("event", "f32"): 129, ("event", "f64"): 165, ("discrete", "f32"): 132, ("discrete", "f64"): 156}
+
+
+#: Bytes of the event log per collision it can keep (a float64 time and two int32 ids), and the
+#: most collisions it can keep (Taichi's arrays count their items in 32 bits).
+LOG_BYTES = 16
+MOST_RECORDED = 2 ** 31 - 1
 
 
 class NotEnoughMemory(MemoryError, ValueError):
@@ -232,17 +299,24 @@ def available_memory(root="/") -> int | None:
     return available
 
 
-def check_memory(n: int, scheme: str, precision: str, available=None):
+def check_memory(n: int, scheme: str, precision: str, available=None, record_events=0):
     """Refuse, before anything is made, a CPU simulation of n circles whose arrays alone
-    (`ARRAY_BYTES`) need more than the memory available (`available_memory`, or `available`
-    bytes when given): it would otherwise be killed part way, or swap for hours. A GPU holds
-    the arrays in its own memory, which Taichi reserves at start; it is not checked here."""
+    (`ARRAY_BYTES`, and LOG_BYTES for each collision its event log can keep) need more than the
+    memory available (`available_memory`, or `available` bytes when given): it would otherwise
+    be killed part way, or swap for hours. A GPU holds the arrays in its own memory, which
+    Taichi reserves at start; it is not checked here."""
     per = ARRAY_BYTES.get((scheme, precision))
     if current_arch() != "cpu" or per is None:  # an unknown scheme is refused where it is read
         return
     available = available_memory() if available is None else available
     if available is None:
         return
+    log = record_events * LOG_BYTES
+    if n * per + log > available and log > 0:
+        raise NotEnoughMemory(
+            f"record_events = {record_events} keeps a log of {log / 1e9:.3g} GB ({LOG_BYTES} bytes a collision), "
+            f"which with the {n * per / 1e9:.3g} GB of the circles' arrays is more than the {available / 1e9:.3g} "
+            f"GB of memory available: keep at most {max(available - n * per, 0) // LOG_BYTES} collisions")
     need = n * per
     if need > available:
         fix = f"at most {available // per} circles"
@@ -285,17 +359,32 @@ def _read_saved(path):
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:  # a damaged member
             raise refuse(f"numpy cannot read its arrays: {error}") from None
     n = d["radius"].shape[0]
-    for name, shape in (("color", (n, 3)), ("box", (2,))):
+    shapes = {"radius": (n,), "box": (2,), "boundary": (), "scheme": (), "precision": (), "dt": (), "time": (),
+              "steps": (), "pair_count": (n,), "wall_count": (n,), "virial": (n,), "wall_impulse": (n,)}
+    for name, shape in shapes.items():
         if d[name].shape != shape:
             raise refuse(f"its {name} has shape {d[name].shape}, not {shape}")
+    numbers = {"box": np.number, "dt": np.number, "time": np.number, "steps": np.integer, "pair_count": np.integer,
+               "wall_count": np.integer, "virial": np.number, "wall_impulse": np.number}
+    for name, kind in numbers.items():
+        if not np.issubdtype(d[name].dtype, kind):
+            raise refuse(f"its {name} has type {d[name].dtype}, not {kind.__name__}")
+    for name in ("pair_count", "wall_count", "virial", "wall_impulse"):
+        if not np.all(np.isfinite(d[name]) & (d[name] >= 0)):
+            raise refuse(f"its {name} holds {d[name][~(np.isfinite(d[name]) & (d[name] >= 0))][0]}, not a "
+                         "finite number >= 0")
     try:
         for name, allowed in (("boundary", BOUNDARIES), ("scheme", SCHEMES), ("precision", PRECISIONS)):
             _choice(name, str(d[name]), allowed)
-        check_box(tuple(d["box"]))
+        precision = str(d["precision"])
+        box = check_box(tuple(float(x) for x in d["box"]))
         check_dt(float(d["dt"]))
         check_count("steps", int(d["steps"]))
-        check_circles(d["pos"], d["vel"], d["radius"], str(d["precision"]))
-        masses_for(d["mass"], d["radius"])
+        check_circles(d["pos"], d["vel"], d["radius"], precision)
+        d["color"] = check_colors(d["color"], n)
+        check_mass_ratio(masses_for(d["mass"], d["radius"]), precision)
+        # A saved state lies inside the walls up to the rounding of its places.
+        check_placed(d["pos"], d["radius"], box, str(d["boundary"]), place_slack(precision, box))
     except (ValueError, TypeError) as error:
         raise refuse(str(error)) from None
     if not (math.isfinite(float(d["time"])) and float(d["time"]) >= 0):
@@ -304,9 +393,12 @@ def _read_saved(path):
 
 
 def check_record_events(record_events, scheme):
-    """record_events: a whole number >= 0 (the log's capacity), above 0 only with the event
-    scheme, the one whose collisions are events at known times."""
+    """record_events: a whole number >= 0 (the log's capacity) up to MOST_RECORDED, above 0 only
+    with the event scheme, the one whose collisions are events at known times."""
     check_count("record_events", record_events, "the most collisions the log keeps; 0 keeps none")
+    if record_events > MOST_RECORDED:
+        raise ValueError(f"record_events = {record_events} is more than the {MOST_RECORDED} collisions a log "
+                         "holds (its arrays count their items in 32 bits): keep fewer")
     if record_events > 0 and scheme != "event":
         raise ValueError(f"record_events = {record_events} with scheme {scheme!r}: only the event scheme logs its "
                          "collisions (the discrete scheme resolves overlaps at the end of each step, with no "
@@ -396,6 +488,13 @@ def _whole_steps():
 WORK_COUNTERS = ("rounds", "sweeps", "cut_steps", "parts_run")
 
 
+def _scalar(x):
+    """A 0-d numpy array of numbers (not of bools) as its number; anything else as it is."""
+    if isinstance(x, np.ndarray) and x.ndim == 0 and np.issubdtype(x.dtype, np.number):
+        return x.item()
+    return x
+
+
 def _unpickle(cls, fields, scene, extras):
     """A pickled Simulation (`Simulation.__reduce__`) made again."""
     return cls._from_fields(fields, scene, extras)
@@ -422,7 +521,7 @@ class Simulation:
             raise TypeError(f"Simulation takes a circles.Scene, not {type(scene).__name__}")
         ensure_init()
         check_record_events(record_events, scene.scheme)
-        check_memory(scene.n, scene.scheme, scene.precision)
+        check_memory(scene.n, scene.scheme, scene.precision, record_events=record_events)
         rng = np.random.default_rng(scene.seed)
         n = scene.n
         (rlo, rhi), (vlo, vhi) = scene.radius, scene.speed
@@ -432,6 +531,7 @@ class Simulation:
         vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
         color = random_colors(n, rng)
         mass = masses_for(scene.mass, radius)
+        check_mass_ratio(mass, scene.precision)
         fraction = float(np.sum(np.pi * radius ** 2)) / (scene.box[0] * scene.box[1])
         check_area_fraction(fraction, n, scene.box)
         periodic = scene.boundary == "periodic"
@@ -455,34 +555,32 @@ class Simulation:
         n = radius.shape[0]
         if n == 0:
             raise ValueError("n = 0 circles: give at least one")
-        check_memory(n, scheme, precision)
+        check_memory(n, scheme, precision, record_events=record_events)
         pos = np.asarray(pos, dtype=np.float64)
         vel = np.asarray(vel, dtype=np.float64)
         check_circles(pos, vel, radius, precision)
-        check_fits(float(radius.max()), box, boundary)
         mass = masses_for("radius" if mass is None else mass, radius)
-        w, h = box
-        if boundary == "walls":
-            out = (pos[:, 0] < radius) | (pos[:, 0] > w - radius) | (pos[:, 1] < radius) | (pos[:, 1] > h - radius)
-            if np.any(out):
-                i = int(np.flatnonzero(out)[0])
-                at = tuple(float(x) for x in pos[i])
-                raise ValueError(f"circle {i} at {at} with radius {radius[i]} is not inside the walls "
-                                 f"[0, {w}] x [0, {h}]: move it inside")
-        else:
-            pos = pos % np.array([w, h])
+        check_mass_ratio(mass, precision)
+        check_placed(pos, radius, box, boundary, 0.0)
+        if boundary == "periodic":
+            pos = pos % np.array(box)
         color = random_colors(n, np.random.default_rng(0)) if color is None else check_colors(color, n)
-        check_area_fraction(float(np.sum(np.pi * radius ** 2)) / (w * h), n, box)
         sim = cls.__new__(cls)
         sim.scene = None
         sim._setup(pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events)
-        overlap = sim._max_overlap()
-        if overlap > INPUT_OVERLAP_TOLERANCE:
-            raise ValueError(f"circles overlap by {overlap:.3g} of their contact distance (tolerance "
-                             f"{INPUT_OVERLAP_TOLERANCE}): place them apart or in contact")
+        sim._check_overlap()
         return sim
 
     # ----------------------------------------------------------------- set-up
+    def _check_overlap(self):
+        """Refuse circles that overlap by more than `overlap_tolerance`: given circles must be
+        apart or in contact."""
+        overlap = self._max_overlap()
+        tolerance = overlap_tolerance(self.precision, self.box, self._radius)
+        if overlap > tolerance:
+            raise ValueError(f"circles overlap by {overlap:.3g} of their contact distance (tolerance {tolerance:.3g} "
+                             f"in {self.precision}): place them apart or in contact")
+
     def _setup(self, pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events):
         self._runtime = runtime()
         _LIVE.add(self)
@@ -503,6 +601,7 @@ class Simulation:
         # Windows of event steps run with the queue split into parts (see `_queue_parts_step`).
         self.parts_run = 0
         self._mass = np.asarray(mass, dtype=np.float64).copy()
+        self._mass_unit = mass_unit(self._mass)  # the kernels' masses and impulses are in it
         self._radius = np.asarray(radius, dtype=np.float64).copy()
         self._color = np.asarray(color, dtype=np.uint8).copy()
         self._rmax = float(self._radius.max())
@@ -576,7 +675,7 @@ class Simulation:
             self._setup_two_level(True)
             # As the kernels see them: radii and inverse masses rounded to the precision.
             radii = self._radius.astype(self._np_real)
-            inv_mass = (1.0 / self._mass).astype(self._np_real)
+            inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
             self._uniform = DISCRETE_UNIFORM and bool(np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]))
             # The first round of a step in one part per thread (`discrete._first_round_in_parts`).
             self._first_parts = DISCRETE_FIRST_IN_PARTS and count_parts() > 1
@@ -703,11 +802,12 @@ class Simulation:
         self.pos.from_numpy(pos[order].astype(self._np_real))
         self.vel.from_numpy(vel[order].astype(self._np_real))
         self.radius.from_numpy(self._radius[order].astype(self._np_real))
-        self.inv_mass.from_numpy((1.0 / self._mass[order]).astype(self._np_real))
+        self.inv_mass.from_numpy((self._mass_unit / self._mass[order]).astype(self._np_real))
         self.pair_count.from_numpy(pair_count[order].astype(np.int32))
         self.wall_count.from_numpy(wall_count[order].astype(np.int32))
-        self.virial.from_numpy(virial[order].astype(np.float64))
-        self.wall_impulse.from_numpy(wall_impulse[order].astype(np.float64))
+        # The impulses' sums in the kernels' unit of mass (exact: a power of two).
+        self.virial.from_numpy(virial[order].astype(np.float64) / self._mass_unit)
+        self.wall_impulse.from_numpy(wall_impulse[order].astype(np.float64) / self._mass_unit)
 
     @property
     def _ids(self):
@@ -726,9 +826,12 @@ class Simulation:
         return out.view(arr.dtype).reshape(arr.shape)
 
     def _download(self):
-        """(pos, vel, pair_count, wall_count, virial, wall_impulse) in creation order, exactly as stored."""
-        return tuple(self._creation_order(a.to_numpy()) for a in
-                     (self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse))
+        """(pos, vel, pair_count, wall_count, virial, wall_impulse) in creation order, exactly as stored
+        (the impulses' sums back in the masses' own unit, `mass_unit`)."""
+        pos, vel, pair_count, wall_count, virial, wall_impulse = (
+            self._creation_order(a.to_numpy()) for a in
+            (self.pos, self.vel, self.pair_count, self.wall_count, self.virial, self.wall_impulse))
+        return pos, vel, pair_count, wall_count, virial * self._mass_unit, wall_impulse * self._mass_unit
 
     def _reorder(self):
         """Sort the arrays by grid cell again, on the device, so that neighbours stay close in memory.
@@ -780,6 +883,7 @@ class Simulation:
     def advance(self, duration: float):
         """Advance by `duration` of simulated time, ending exactly at the old time + duration."""
         self._live()
+        duration = _scalar(duration)
         if isinstance(duration, bool) or not isinstance(duration, Real) or not math.isfinite(duration) \
                 or duration < 0:
             raise ValueError(f"duration {duration!r} must be a finite number of simulated seconds >= 0")
@@ -789,18 +893,24 @@ class Simulation:
             while self.time < end:
                 left = end - self.time
                 h = min(self.dt, left)
-                if self.time + h == self.time:
-                    raise ValueError(f"dt = {self.dt:g} is below the resolution of the simulated clock at time "
-                                     f"{self.time:g} ({np.spacing(self.time):g}): the clock would not move; give "
-                                     "a larger dt")
+                self._check_clock_moves(h)
                 done = self._step(h)
                 # The last piece ends at `end` itself: time + (end - time) can round a unit
                 # below it, which would cost a step of a unit's length more.
+                before = self.time
                 self.time = end if done == left else self.time + done
                 self.steps += 1
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
                 steps.between_steps()
+                if self.time == before:
+                    # A step cut short (a periodic box's limit, or a collision that would outrun
+                    # the grid) below the clock's resolution: the next would be cut the same way.
+                    raise ValueError(f"a step was cut to {done:g} s, below the resolution of the simulated clock "
+                                     f"at time {self.time:g} ({np.spacing(self.time):g}): the clock cannot follow "
+                                     f"the steps (the circles are at time {self.time:g} to within it); start the "
+                                     "clock again from 0 with Simulation.from_arrays(sim.state() ...), or, in a "
+                                     "periodic box, lower the speeds or enlarge the box")
             self.time = end
         self._check_finite()
         return self
@@ -808,8 +918,11 @@ class Simulation:
     def step(self, k: int = 1):
         """Take k steps of length dt."""
         self._live()
+        k = _scalar(k)
         if isinstance(k, bool) or not isinstance(k, Real) or not math.isfinite(k) or int(k) != k or k < 0:
             raise ValueError(f"k = {k!r} must be a whole number of steps >= 0")
+        if k > 0:
+            self._check_clock_moves(self.dt)
         with _whole_steps() as steps:
             for _ in range(int(k)):
                 done = 0.0
@@ -822,6 +935,12 @@ class Simulation:
                 steps.between_steps()
         self._check_finite()
         return self
+
+    def _check_clock_moves(self, h):
+        """Refuse a step of length h that the simulated clock, at its time now, cannot count."""
+        if self.time + h == self.time:
+            raise ValueError(f"dt = {h:g} is below the resolution of the simulated clock at time {self.time:g} "
+                             f"({np.spacing(self.time):g}): the clock would not move; give a larger dt")
 
     def _step(self, h):
         if self.scheme == "event":
@@ -904,7 +1023,7 @@ class Simulation:
             if rounds == check:
                 check *= 2
                 events = reductions.events_since(self.pair_count, self.wall_count, b["pair_count"], b["wall_count"])
-                if events > event.MOST_EVENTS_PER_CIRCLE * self.n:
+                if events > event.most_events(self.n):
                     raise self._jammed()
             if executed < 0:
                 # A collision would outrun the grid: redo the step up to it (see circles.event).
@@ -1076,10 +1195,13 @@ class Simulation:
         """The error of an event step that executed more than event.MOST_EVENTS_PER_CIRCLE events
         per circle."""
         return RuntimeError(
-            f"the event step from time {self.time} executed more than {event.MOST_EVENTS_PER_CIRCLE} "
-            "events per circle without reaching its end: circles jammed in a chain that spans the box (touching "
-            "each other and the walls) collide without end at one instant. Give them room (a lower area "
-            "fraction, or radii that leave gaps) or use scheme='discrete'. The state is not usable after this.")
+            f"the event step from time {self.time} executed more than {event.most_events(self.n)} events "
+            f"({event.MOST_EVENTS_PER_CIRCLE} per circle, or {event.MOST_EVENTS_ANY_STEP} in any step) without "
+            "reaching its end. Most often circles jammed in a chain that spans the box "
+            "(touching each other and the walls) collide without end at one instant: give them room (a lower "
+            "area fraction, or radii that leave gaps) or use scheme='discrete'. A step can also hold that many "
+            "collisions of its own (a circle M times as heavy as a light one pressing it against a wall makes "
+            "about pi sqrt(M) of them): then give a shorter dt. The state is not usable after this.")
 
     def _redo(self, log_count):
         """Restore the state at the step's start for a step cut short at the collision that would
@@ -1240,9 +1362,10 @@ class Simulation:
         """A simulation in the state `_fields` (or a file, `_read_saved`) gives, with `extras`
         (`_extras`) when given."""
         ensure_init()
-        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]))
         extras = extras or {}
         log = extras.get("log")
+        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]),
+                     record_events=0 if log is None else log[0])
         sim = cls.__new__(cls)
         sim.scene = scene
         sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
@@ -1306,7 +1429,15 @@ class Simulation:
         """A simulation from a file that `save` wrote: the same state, time and step count, so
         that it goes on as the saved one would have, bit for bit. A file that is not such an
         archive raises ValueError (a missing one FileNotFoundError)."""
-        return cls._from_fields(_read_saved(path))
+        sim = cls._from_fields(_read_saved(path))
+        if sim.scheme == "event":  # its circles never overlap (the discrete scheme's do, by its errors)
+            try:
+                sim._check_overlap()
+            except ValueError as error:
+                sim._release()
+                raise ValueError(f"{path} is not a simulation written by Simulation.save ({error}): load the file "
+                                 "that save wrote") from None
+        return sim
 
     def __repr__(self):
         return (f"Simulation(n={self.n}, box={self.box}, boundary={self.boundary!r}, scheme={self.scheme!r}, "

@@ -153,6 +153,8 @@ def test_no_circles_gives_the_background(canvas):
     ({"height": 100_000}, ["height", "100000"]),
     ({"width": 12.5}, ["width", "12.5"]),
     ({"color_mode": "rainbow"}, ["rainbow", "random", "speed"]),
+    ({"speed_scale": "a"}, ["speed_scale", "'a'", "positive finite number"]),
+    ({"speed_scale": -1.0}, ["speed_scale", "-1.0", "positive finite number"]),
 ])
 def test_bad_arguments_are_refused_with_the_allowed_values(canvas, options, words):
     arguments = {"width": 64, "height": 36, "color_mode": "random", **options}

@@ -403,7 +403,10 @@ def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
             sim.step(bad)
     assert sim.steps == 2 and np.array_equal(sim.state().pos, before)
     sim.step(np.int64(1)).step(2.0).advance(np.float32(0.5) * sim.dt)
-    assert sim.steps == 2 + 1 + 2 + 1
+    sim.step(np.array(1)).advance(np.array(0.5 * sim.dt))  # 0-d arrays, as numpy reductions give
+    with pytest.raises(ValueError, match="k = .* must be a whole number of steps"):
+        sim.step(np.array(True))
+    assert sim.steps == 2 + 1 + 2 + 1 + 1 + 1
 
 
 def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circles_cpu):
@@ -433,4 +436,14 @@ def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circ
     slow_clock.time = 1e6  # as a loaded long run's: float64 counts 1.2e-10 there
     with pytest.raises(ValueError, match=r"dt = 1e-12 is below the resolution of the simulated clock"):
         slow_clock.advance(1.0)
-    assert slow_clock.steps == 0
+    with pytest.raises(ValueError, match=r"dt = 1e-12 is below the resolution of the simulated clock"):
+        slow_clock.step(3)  # it moved the circles and left the clock where it was
+    assert slow_clock.steps == 0 and np.array_equal(slow_clock.state().pos, pos)
+    # A periodic box cuts each step to (W/2 - 2 rmax) / (2 vlim), 0.59 s here, below the clock's
+    # resolution at 1e16 (2 s), where dt (10 s) is not: advance stopped never.
+    torus = circles_cpu.Simulation.from_arrays(pos, np.array([[1.0, 0.0], [0.0, 1.0]]), radius, box=(4.0, 3.0),
+                                               boundary="periodic", dt=10.0)
+    torus.time = 1e16
+    with pytest.raises(ValueError, match=r"a step was cut to 0.5\d* s, below the resolution of the simulated clock"):
+        torus.advance(100.0)
+    assert torus.steps == 1 and torus.time == 1e16

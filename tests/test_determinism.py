@@ -75,12 +75,14 @@ def test_same_state_with_1_and_2_threads(tmp_path):
         assert one[f"{name}.counts"][0] > 500  # the runs did collide
 
 
+@pytest.mark.parametrize("precision", ["f64", "f32"])
 @pytest.mark.parametrize("scheme", ["event", "discrete"])
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
-def test_save_load_continue_is_seamless(circles_cpu, tmp_path, scheme, boundary):
-    """2k steps straight equal k steps, save, load, k steps, bit for bit."""
+def test_save_load_continue_is_seamless(circles_cpu, tmp_path, scheme, boundary, precision):
+    """2k steps straight equal k steps, save, load, k steps, bit for bit (the states load: their
+    places pass load's checks, up to the rounding of the precision)."""
     scene = circles_cpu.Scene(n=800, box=(0.8, 0.6), radius=(0.006, 0.012), speed=(0.5, 1.0),
-                              boundary=boundary, scheme=scheme, precision="f64", seed=31)
+                              boundary=boundary, scheme=scheme, precision=precision, seed=31)
     k = 15
     straight = circles_cpu.Simulation(scene)
     straight.step(2 * k)
@@ -170,10 +172,33 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
     np.savez(tmp_path / "scheme.npz", **{**fields, "scheme": "magic"})
     np.savez(tmp_path / "radius.npz", **{**fields, "radius": np.where(np.arange(40) == 7, 0.0, fields["radius"])})
     np.savez(tmp_path / "time.npz", **{**fields, "time": np.nan})
+    # States the simulation could not have reached: each would have run (wrongly) before.
+    pos = fields["pos"].copy()
+    outside, overlapping = pos.copy(), pos.copy()
+    outside[5] = (7.5, 1.0)
+    overlapping[9] = overlapping[4] + (0.1, 0.0)  # 0.1 apart, radii 0.08
+    np.savez(tmp_path / "outside.npz", **{**fields, "pos": outside})
+    np.savez(tmp_path / "overlap.npz", **{**fields, "pos": overlapping})
+    np.savez(tmp_path / "large.npz", **{**fields, "radius": np.where(np.arange(40) == 3, 1.2, fields["radius"])})
+    np.savez(tmp_path / "counts.npz", **{**fields, "pair_count": fields["pair_count"][:-1]})
+    np.savez(tmp_path / "negative.npz", **{**fields, "wall_count": np.full(40, -5)})
+    np.savez(tmp_path / "color.npz", **{**fields, "color": np.full((40, 3), 300)})
+    np.savez(tmp_path / "steps.npz", **{**fields, "steps": 2.5})
+    np.savez(tmp_path / "clock.npz", **{**fields, "time": "abc"})
+    np.savez(tmp_path / "masses.npz", **{**fields, "mass": np.where(np.arange(40) == 2, 1e300, fields["mass"])})
     for name, why in (("notes.npz", "not an .npz archive"), ("one.npy", "one array"),
                       ("partial.npz", "lacks radius, mass, color, box"), ("shape.npz", "pos has shape"),
                       ("cut.npz", "not an .npz archive"), ("scheme.npz", "scheme 'magic' is unknown"),
-                      ("radius.npz", "radius 0.0 must be finite and > 0"), ("time.npz", "time nan")):
+                      ("radius.npz", "radius 0.0 must be finite and > 0"), ("time.npz", "time nan"),
+                      ("outside.npz", "circle 5 at (7.5, 1.0) with radius 0.08 is not inside the walls"),
+                      ("overlap.npz", "circles overlap by "),
+                      ("large.npz", "radius 1.2 is larger than the box"),
+                      ("counts.npz", "pair_count has shape (39,), not (40,)"),
+                      ("negative.npz", "wall_count holds -5, not a finite number >= 0"),
+                      ("color.npz", "color of circle 0, [300, 300, 300], is not three whole numbers"),
+                      ("steps.npz", "steps has type float64, not integer"),
+                      ("clock.npz", "time has type <U3, not number"),
+                      ("masses.npz", "circle 2 (mass 1e+300) is")):
         with pytest.raises(ValueError, match="not a simulation written by Simulation.save") as refused:
             circles_cpu.Simulation.load(tmp_path / name)
         assert why in str(refused.value) and name in str(refused.value), str(refused.value)
@@ -188,7 +213,14 @@ import circles
 circles.init(arch="cpu")
 scene = circles.Scene(n=300, box=(4.0, 3.0), radius=(0.04, 0.06), seed=9)
 a = circles.Simulation(scene)
-a.step(6)
+a.step(3)
+unknown = []
+for options in ({"cpu_max_num_thread": 1}, {"cpu_max_num_threads": "two"}, {"debug": "yes"}):
+    try:
+        circles.init(arch="cpu", **options)  # refused before the runtime is touched
+    except ValueError as error:
+        unknown.append(str(error))
+a.step(3)
 a.render(64, 36)
 before = a.state()
 b = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=9, scheme="discrete"))
@@ -210,7 +242,7 @@ c.render(64, 36)
 d = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=9, scheme="discrete"))
 d.step(2)
 np.savez(sys.argv[2], pos_before=before.pos, vel_before=before.vel, pos=c.state().pos, vel=c.state().vel,
-         refused=np.array(refused), pairs=d.stats()["pair_collisions"])
+         refused=np.array(refused), pairs=d.stats()["pair_collisions"], unknown=np.array(unknown))
 """
 
 
@@ -219,8 +251,15 @@ def test_a_restart_of_the_runtime_leaves_old_simulations_refusing_and_new_ones_e
     arrays and refuse every use with a RuntimeError that says so (before, a step of a new
     simulation after the restart ended the process with a segmentation fault), and a new
     simulation runs as in a fresh process (one thread now, two before: the same state bit for
-    bit)."""
+    bit). Options ti.init would refuse are refused before the runtime is touched (ti.init stops
+    the running runtime and then fails; the package was left unusable, and a runtime started
+    after such a failure could crash the process), so the simulations made before go on."""
     out = run_script(RESTART, "cpu", tmp_path / "restart.npz", timeout=600)
+    unknown = out["unknown"].tolist()
+    assert len(unknown) == 3, unknown
+    assert "'cpu_max_num_thread' is not one that ti.init takes: did you mean cpu_max_num_threads?" in unknown[0]
+    assert "cpu_max_num_threads = 'two' is not a value ti.init takes: give a whole number" in unknown[1]
+    assert "debug = 'yes' is not a value ti.init takes: give True or False" in unknown[2]
     assert sorted(out["refused"].tolist()) == ["advance", "events", "render", "save", "state", "stats", "step"]
     assert np.array_equal(out["pos"], out["pos_before"]) and np.array_equal(out["vel"], out["vel_before"])
     assert int(out["pairs"]) > 0

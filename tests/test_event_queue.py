@@ -430,8 +430,8 @@ def test_queue_step_of_1e_36_with_touching_pairs(circles_cpu, monkeypatch, preci
 def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypatch, queue):
     """Three rows of three circles that fill their box exactly (each touching its neighbours and
     the walls), moving at +0.5, 0, -0.5: no circle can move, so the collisions at time 0 never
-    end. The step stops after event.MOST_EVENTS_PER_CIRCLE events per circle with an error that
-    names the limit and the way out, instead of running for ever: on the queue (a CPU), and in
+    end. The step stops after `event.most_events` events (MOST_EVENTS_PER_CIRCLE a circle, at
+    least MOST_EVENTS_ANY_STEP) with an error that names the limit and the way out, instead of running for ever: on the queue (a CPU), and in
     the rounds (a GPU's execution), which count their events from simulation.JAM_CHECK_ROUNDS
     rounds on."""
     from circles import event, simulation
@@ -443,16 +443,17 @@ def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypa
         # The rounds read the limit at every check: a lower one keeps the test short (each
         # round executes a few of the jam's events).
         monkeypatch.setattr(event, "MOST_EVENTS_PER_CIRCLE", 100)
+        monkeypatch.setattr(event, "MOST_EVENTS_ANY_STEP", 100)
     pos, vel, radius, box = lattice_head_on(3)
     sim = circles_cpu.Simulation.from_arrays(pos, vel, 2 * radius, box=box, scheme="event", precision="f64")
     assert sim.stats()["max_overlap"] <= 1e-12  # touching, not overlapping
-    with pytest.raises(RuntimeError, match=f"more than {event.MOST_EVENTS_PER_CIRCLE} events per circle.*"
-                                           "jammed.*scheme='discrete'"):
+    with pytest.raises(RuntimeError, match=f"more than {event.most_events(sim.n)} events .*"
+                                           "jammed.*scheme='discrete'.*shorter dt"):
         sim.step(1)
     if not queue:
         # It stopped at the first check past the limit: the checks double, so fewer than twice
         # the rounds that the limit's events need at one event a round.
-        assert simulation.JAM_CHECK_ROUNDS <= sim.rounds <= 2 * event.MOST_EVENTS_PER_CIRCLE * sim.n
+        assert simulation.JAM_CHECK_ROUNDS <= sim.rounds <= 2 * event.most_events(sim.n)
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")

@@ -7,7 +7,8 @@ import taichi as ti
 
 from circles import cli
 from circles import simulation as simulation_module
-from circles.simulation import ARRAY_BYTES, NotEnoughMemory, available_memory, check_memory
+from circles.simulation import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, NotEnoughMemory, available_memory,
+                                check_memory)
 from conftest import TEST_ARCH
 
 pytestmark = pytest.mark.skipif(TEST_ARCH != "cpu", reason="the memory checked is a CPU's")
@@ -67,6 +68,27 @@ def test_a_scene_beyond_the_memory_is_refused_with_what_fits(circles_cpu, monkey
     monkeypatch.setattr(simulation_module, "available_memory", lambda: ARRAY_BYTES[("discrete", "f32")] - 1)
     with pytest.raises(NotEnoughMemory, match="n = 1 circle needs at least"):
         circles_cpu.Simulation.load(tmp_path / "one.npz")
+
+
+def test_an_event_log_beyond_the_memory_is_refused(circles_cpu, monkeypatch):
+    """record_events counts in the memory a simulation needs (LOG_BYTES a collision): a log of
+    2e9 collisions on a machine of 24 GB was killed by the system with no message, and 3e9 gave
+    a raw Taichi error about the array's shape."""
+    with pytest.raises(NotEnoughMemory) as caught:
+        check_memory(1000, "event", "f64", available=10 ** 9, record_events=10 ** 8)
+    message = str(caught.value)
+    for part in ("record_events = 100000000", "1.6 GB", f"{LOG_BYTES} bytes a collision",
+                 f"keep at most {(10 ** 9 - 165 * 1000) // LOG_BYTES} collisions"):
+        assert part in message, message
+    check_memory(1000, "event", "f64", available=165 * 1000 + LOG_BYTES * 10 ** 6, record_events=10 ** 6)
+    monkeypatch.setattr(simulation_module, "available_memory", lambda: 10 ** 9)
+    pos, vel = np.array([[1.0, 1.0], [3.0, 3.0]]), np.zeros((2, 2))
+    with pytest.raises(NotEnoughMemory, match="record_events = 100000000"):
+        circles_cpu.Simulation.from_arrays(pos, vel, [0.1, 0.1], box=(4.0, 4.0), record_events=10 ** 8)
+    with pytest.raises(NotEnoughMemory, match="record_events = 100000000"):
+        circles_cpu.Simulation(circles_cpu.Scene(n=2, box=(4.0, 4.0), radius=0.1), record_events=10 ** 8)
+    with pytest.raises(ValueError, match=f"record_events = 3000000000 is more than the {MOST_RECORDED}"):
+        circles_cpu.Simulation.from_arrays(pos, vel, [0.1, 0.1], box=(4.0, 4.0), record_events=3 * 10 ** 9)
 
 
 def test_the_command_line_refuses_it_with_status_2(circles_cpu, monkeypatch, capsys, tmp_path):

@@ -390,6 +390,26 @@ def test_mass_ratio_1e9_head_on(circles_cpu, heavy_first):
     assert np.array(st["momentum"]) == pytest.approx(p0, rel=1e-12)
 
 
+@pytest.mark.parametrize("digits", [3, 6])
+def test_a_heavy_circle_pressing_a_light_one_on_a_wall_counts_the_digits_of_pi(circles_cpu, digits):
+    """A circle of mass M = 100^(digits - 1) moving onto one of mass 1 at rest before a wall: the
+    light one shuttles between the heavy one and the wall until the heavy one turns back, in
+    exactly floor(pi sqrt(M)) collisions (the billiard of G. Galperin, 2003): 314 for 1e4,
+    314159 for 1e10. A single count off means a collision lost or made twice; energy is kept
+    to 1e-9 relative over 314159 collisions (each rounds at 1e-16). Most of the 314159 fall in
+    one step, past the 10000 events per circle that stop a jammed step: every step may
+    execute a million."""
+    m_heavy = 100.0 ** (digits - 1)
+    sim = _sim(circles_cpu, [[1.0, 1.0], [3.0, 1.0]], [[0.0, 0.0], [-1.0, 0.0]], [0.1, 0.1],
+               mass=[1.0, m_heavy], box=(100.0, 2.0))
+    e0 = sim.stats()["kinetic_energy"]
+    sim.advance(10.0)
+    st = sim.stats()
+    assert st["pair_collisions"] + st["wall_collisions"] == int(str(math.pi).replace(".", "")[:digits])
+    assert st["kinetic_energy"] == pytest.approx(e0, rel=1e-9)
+    assert sim.state().vel[1, 0] > 0 and sim.state().vel[0, 0] < sim.state().vel[1, 0]  # no more to come
+
+
 def _random_place(rng, radius, box, tries=100_000):
     """Non-overlapping random placement inside the walls by rejection (small N only)."""
     pos = np.zeros((len(radius), 2))

@@ -108,6 +108,10 @@ def test_same_seed_same_placement_other_seed_differs(circles_cpu):
     a, b, c = placed(8), placed(8), placed(9)
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     assert not np.array_equal(a.pos, c.pos)
+    # Seeds that differ only above bit 31 place apart too (the placement's hash keys on 31
+    # bits; a larger seed's key is drawn from all of its bits, not cut to the low ones).
+    for far in (8 + 2 ** 31, 8 + 2 ** 32, 8 + 2 ** 64):
+        assert not np.array_equal(placed(far).pos, a.pos)
 
 
 def test_wide_radius_spread_places_large_circles_first(circles_cpu):

@@ -110,6 +110,13 @@ def test_area_fraction_beyond_densest_packing(circles_cpu, n, radius, fraction):
     refused(scene(circles_cpu, n=n, box=(1.0, 1.0), radius=radius), shown, r"0\.9(07|069)|0\.91\b")
 
 
+def test_a_fraction_just_above_the_densest_packing_is_shown_apart_from_it(circles_cpu):
+    """4157 circles of radius 0.1 in 16 x 9 fill 0.90692: shown to 4 places it read 'area
+    fraction 0.9069 ... exceeds the densest packing 0.9069'."""
+    message = refused(scene(circles_cpu, n=4157, box=(16.0, 9.0), radius=0.1), "0.90692", "0.90690")
+    assert "0.9069 " not in message
+
+
 # ---- Simulation.from_arrays ----------------------------------------------
 
 def arrays(n=4):
@@ -183,3 +190,60 @@ def test_from_arrays_colors_are_0_to_255_rgb(circles_cpu):
     refused(from_arrays(circles_cpu, color=-rgb), r"circle 0, \[-10", number(255))
     refused(from_arrays(circles_cpu, color=rgb[:, :2]), r"\(4, 2\)", r"\(4, 3\)")
     refused(from_arrays(circles_cpu, color=rgb > 9), "bool")
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_a_random_scene_leaves_room_to_place_its_largest_circle(circles_cpu, precision):
+    """A walled scene whose circle fills the box's side was accepted and then failed inside the
+    placement ("internal error"): it is refused with the largest radius that can be placed,
+    and that radius places."""
+    message = refused(scene(circles_cpu, n=1, box=(1.0, 1.0), radius=0.5, precision=precision), number(0.5),
+                      "no room")
+    most = float(re.search(r"at most ([\d.]+)", message).group(1))
+    assert 0.4999 < most < 0.5
+    placed = circles_cpu.Simulation(circles_cpu.Scene(n=1, box=(1.0, 1.0), radius=most, precision=precision))
+    x = placed.state().pos[0]
+    assert np.all((x >= most) & (x <= 1.0 - most))
+
+
+def test_from_arrays_touching_circles_in_f32(circles_cpu):
+    """A row of touching circles given in float64 overlaps by float32's rounding once stored
+    (3.7e-7 of the contact distance here): it is a contact in f32, not an overlap, as it is
+    in f64; an overlap beyond the rounding is still refused."""
+    pos = np.array([[0.2, 0.5]] + [[0.37 + 0.1 * k, 0.5] for k in range(5)])
+    vel = np.array([[1.0, 0.0]] + [[0.0, 0.0]] * 5)
+    radius = np.full(6, 0.05)
+    for precision in ("f32", "f64"):
+        sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, box=(1.2, 1.0), precision=precision)
+        sim.advance(0.2)
+        assert sim.state().vel[5, 0] == pytest.approx(1.0, abs=1e-6)  # the cradle passes it on
+    closer = pos.copy()
+    closer[2, 0] -= 1e-4  # 1e-3 of a contact into circle 1
+    refused(lambda: circles_cpu.Simulation.from_arrays(closer, vel, radius, box=(1.2, 1.0), precision="f32"),
+            "overlap by 0.001", "tolerance")
+
+
+def test_masses_of_any_size_within_the_ratio_the_precision_carries(circles_cpu):
+    """Only mass ratios change the motion, and the kernels hold masses in a unit of their own (a
+    power of two): masses near 2^127 (1.7e38) or 2^-140 (7e-43) in f32, whose inverses were
+    lost to float32's range, move bit for bit as masses near 1, with the stats in the masses'
+    own unit; a ratio beyond what the precision carries is refused before any work."""
+    p, v, r = arrays()
+    runs = {}
+    for unit in (1.0, 2.0 ** 127, 2.0 ** -140):
+        sim = circles_cpu.Simulation.from_arrays(p, v, r, mass=np.array([1.0, 2.0, 3.0, 4.0]) * unit,
+                                                 box=(1.0, 1.0), precision="f32")
+        sim.advance(3.0)
+        runs[unit] = (sim.state(), sim.stats())
+    (s1, t1) = runs[1.0]
+    assert t1["pair_collisions"] > 0 and t1["wall_collisions"] > 0
+    for unit in (2.0 ** 127, 2.0 ** -140):
+        s, t = runs[unit]
+        assert np.array_equal(s.pos, s1.pos) and np.array_equal(s.vel, s1.vel)
+        for key in ("kinetic_energy", "virial", "wall_impulse"):
+            assert t[key] == pytest.approx(t1[key] * unit, rel=1e-12), key
+    refused(from_arrays(circles_cpu, mass=np.array([1.0, 1e37, 1.0, 1.0]), precision="f32"),
+            r"circle 1 \(mass 1e\+37\) is 1e\+37 times as heavy as circle 0", r"1e\+36")
+    refused(from_arrays(circles_cpu, mass=np.array([1e-200, 1.0, 1e200, 1.0])), r"1e\+400|inf", r"1e\+300")
+    refused(from_arrays(circles_cpu, radius=np.array([0.05, 1e-20, 0.05, 0.05]), mass="area", precision="f32"),
+            "times as heavy as circle 1", r"1e\+36")
