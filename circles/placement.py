@@ -376,7 +376,12 @@ def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Gen
             return (*hexagonal(radius * scale, box, periodic, rng, single), scale)
         except ValueError:
             if scale < 0.3:
-                raise
+                w, h = box
+                fraction = float(np.sum(np.pi * radius ** 2)) / (w * h)
+                raise ValueError(f"cannot place {radius.shape[0]} circles of radius up to {float(radius.max())} in a "
+                                 f"{w} x {h} box (area fraction {fraction:.4f}): no lattice of the largest radius "
+                                 "holds them, even with every radius shrunk to 0.3 of its own to start; use "
+                                 "fewer or smaller circles, a narrower spread of radii, or a bigger box") from None
             scale *= 0.98
     raise AssertionError("unreachable")
 

@@ -253,9 +253,21 @@ def default_dt(scheme, radius, vel):
 
 #: Bytes per circle of the arrays a simulation holds on a CPU, by scheme and precision: the
 #: least memory a scene needs, before the temporary arrays of its placement (counted by
-#: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds 61 bytes a
-#: circle more in f32, 81 in f64.
+#: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds PART_BYTES a
+#: circle more.
 ARRAY_BYTES = {("event", "f32"): 129, ("event", "f64"): 165, ("discrete", "f32"): 132, ("discrete", "f64"): 156}
+PART_BYTES = {"f32": 61, "f64": 81}
+
+
+def bytes_per_circle(n, scheme, precision):
+    """ARRAY_BYTES of a CPU simulation of n circles, with PART_BYTES when its event queue will
+    be split into parts (several threads, above the one-thread sizes; counted also where a
+    spread of radii will give a two-level grid and one queue, which is known only after the
+    radii are drawn)."""
+    per = ARRAY_BYTES[(scheme, precision)]
+    if scheme == "event" and EVENT_QUEUE_ON_CPU and not serial_loops(n, scheme) and count_parts() > 1:
+        per += PART_BYTES[precision]
+    return per
 
 
 #: Bytes of the event log per collision it can keep (a float64 time and two int32 ids), and the
@@ -301,13 +313,13 @@ def available_memory(root="/") -> int | None:
 
 def check_memory(n: int, scheme: str, precision: str, available=None, record_events=0):
     """Refuse, before anything is made, a CPU simulation of n circles whose arrays alone
-    (`ARRAY_BYTES`, and LOG_BYTES for each collision its event log can keep) need more than the
+    (`bytes_per_circle`, and LOG_BYTES for each collision its event log can keep) need more than the
     memory available (`available_memory`, or `available` bytes when given): it would otherwise
     be killed part way, or swap for hours. A GPU holds the arrays in its own memory, which
     Taichi reserves at start; it is not checked here."""
-    per = ARRAY_BYTES.get((scheme, precision))
-    if current_arch() != "cpu" or per is None:  # an unknown scheme is refused where it is read
-        return
+    if current_arch() != "cpu" or (scheme, precision) not in ARRAY_BYTES:
+        return  # (an unknown scheme is refused where it is read)
+    per = bytes_per_circle(n, scheme, precision)
     available = available_memory() if available is None else available
     if available is None:
         return
@@ -321,7 +333,7 @@ def check_memory(n: int, scheme: str, precision: str, available=None, record_eve
     if need > available:
         fix = f"at most {available // per} circles"
         if precision == "f64":
-            fix += f" (in f32, {available // ARRAY_BYTES[(scheme, 'f32')]})"
+            fix += f" (in f32, {available // bytes_per_circle(n, scheme, 'f32')})"
         who = "circle needs" if n == 1 else "circles need"
         raise NotEnoughMemory(
             f"n = {n} {who} at least {need / 1e9:.3g} GB for their arrays ({per} bytes a circle with the "

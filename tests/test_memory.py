@@ -7,8 +7,10 @@ import taichi as ti
 
 from circles import cli
 from circles import simulation as simulation_module
-from circles.simulation import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, NotEnoughMemory, available_memory,
-                                check_memory)
+from circles.backend import serial_loops
+from circles.grid import count_parts
+from circles.simulation import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, PART_BYTES, NotEnoughMemory,
+                                available_memory, check_memory)
 from conftest import TEST_ARCH
 
 pytestmark = pytest.mark.skipif(TEST_ARCH != "cpu", reason="the memory checked is a CPU's")
@@ -44,15 +46,33 @@ def test_array_bytes_are_what_a_simulation_holds(circles_cpu, scheme, precision)
     assert ARRAY_BYTES[(scheme, precision)] <= per <= 1.02 * ARRAY_BYTES[(scheme, precision)], per
 
 
+def test_a_queue_in_parts_counts_its_arrays(circles_cpu):
+    """An event queue split into parts (several threads, 150000 circles) holds PART_BYTES a
+    circle more, and the memory check counts them (it counted ARRAY_BYTES alone, so a scene
+    needing 28.5 MB was let into 22.5)."""
+    n = 150_000
+    split = TEST_ARCH == "cpu" and not serial_loops(n, "event") and count_parts() > 1
+    per = ARRAY_BYTES[("event", "f32")] + (PART_BYTES["f32"] if split else 0)
+    check_memory(n, "event", "f32", available=per * n)
+    with pytest.raises(NotEnoughMemory, match=f"{per} bytes a circle"):
+        check_memory(n, "event", "f32", available=per * n - 1)
+    if split:
+        sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=(627.0, 353.0), radius=0.5, precision="f32",
+                                                       seed=0))
+        sim.step(2)
+        assert sim._parts
+        assert per <= held_bytes(sim) / n <= 1.02 * per, held_bytes(sim) / n
+
+
 def test_a_scene_beyond_the_memory_is_refused_with_what_fits(circles_cpu, monkeypatch, tmp_path):
     with pytest.raises(NotEnoughMemory) as caught:
-        check_memory(10 ** 6, "event", "f64", available=10 ** 8)
+        check_memory(10 ** 6, "discrete", "f64", available=10 ** 8)
     message = str(caught.value)
-    for part in ("n = 1000000 circles", "0.165 GB", "165 bytes a circle", "event scheme in f64", "0.1 GB",
-                 "at most 606060 circles (in f32, 775193)"):
+    for part in ("n = 1000000 circles", "0.156 GB", "156 bytes a circle", "discrete scheme in f64", "0.1 GB",
+                 "at most 641025 circles (in f32, 757575)"):
         assert part in message, message
     assert isinstance(caught.value, ValueError) and isinstance(caught.value, MemoryError)
-    check_memory(10 ** 6, "event", "f64", available=165 * 10 ** 6)  # exactly enough: no error
+    check_memory(10 ** 6, "discrete", "f64", available=156 * 10 ** 6)  # exactly enough: no error
     # Refused before the circles are drawn or placed, by the constructor and by from_arrays.
     monkeypatch.setattr(simulation_module, "available_memory", lambda: 2 * ARRAY_BYTES[("discrete", "f32")] - 1)
     with pytest.raises(NotEnoughMemory, match="n = 2 circles"):

@@ -217,3 +217,17 @@ def test_method_by_area_fraction_and_spread():
     box = box_for(n, (0.005, 0.015), 0.8)
     assert not placement.lattice_fits(spread, box, False)
     assert placement.method(spread, box).startswith("filled lattice")
+
+
+def test_a_spread_no_lattice_holds_is_refused_with_its_own_radii():
+    """Two circles of radius 25 among 198 of radius 0.5 at area fraction 0.6: no lattice of the
+    largest radius holds 200 sites, even shrunk to 0.3. The refusal names the radii and the
+    area fraction given (it named the shrunk ones: radius up to 7.4, area fraction 0.053)."""
+    from circles import placement
+
+    radius = np.full(200, 0.5)
+    radius[:2] = 25.0
+    side = math.sqrt(float(np.sum(np.pi * radius ** 2)) / 0.6)
+    with pytest.raises(ValueError, match=r"cannot place 200 circles of radius up to 25\.0 .* \(area fraction "
+                                         r"0\.6000\).*narrower spread"):
+        placement.hexagonal_shrunk(radius, (side, side), False, np.random.default_rng(0))
