@@ -162,7 +162,7 @@ def mass_unit(mass):
     is exact, so velocities come out bit for bit as with the masses as given wherever those
     fit the precision, and masses of any magnitude fit (`MAX_MASS_RATIO`)."""
     lo, hi = float(np.min(mass)), float(np.max(mass))
-    return 2.0 ** round(0.5 * (math.log2(lo) + math.log2(hi)))
+    return 2.0 ** min(round(0.5 * (math.log2(lo) + math.log2(hi))), 1023)
 
 
 def check_colors(color, n):
