@@ -441,6 +441,8 @@ def _run(scene, options):
 
 def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
              interrupted):
+    from .video import frames_text
+
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
     rate = sim.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
@@ -459,7 +461,7 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
         ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
-        ("wrote", f"{writer.path} ({writer.frames} frame{'s' if writer.frames != 1 else ''} at {writer.fps:g} fps)"
+        ("wrote", f"{writer.path} ({frames_text(writer.frames)} at {writer.fps:g} fps)"
                   if writer.frames else "nothing: stopped before the first frame was written"),
     ]
     for name, text in lines:

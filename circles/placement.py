@@ -62,7 +62,7 @@ import taichi as ti
 
 from .geometry import cell_index, displacement, neighbour_range
 from .grid import Grid, prefix_sum
-from .scene import DENSEST_PACKING, PLACE_CLEARANCE
+from .scene import DENSEST_PACKING, PLACE_CLEARANCE, rounding_margin
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -278,12 +278,6 @@ def _lattice_shape(n, usable_w, usable_h, periodic):
         if best is None or d > best[4]:
             best = (nx, ny, ax, ay, d)
     return best
-
-
-def rounding_margin(box, single: bool) -> float:
-    """A bound on how far rounding a position to the storage precision (and wrapping it) moves it."""
-    eps = 2.0 ** -24 if single else 2.0 ** -53
-    return 4.0 * max(box) * eps
 
 
 def hexagonal(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator, single: bool = False,

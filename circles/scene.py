@@ -120,13 +120,18 @@ def check_fits(rmax, box, boundary):
 PLACE_CLEARANCE = 1e-6
 
 
+def rounding_margin(box, single: bool) -> float:
+    """A bound on how far rounding a position to the storage precision (and wrapping it) moves it."""
+    eps = 2.0 ** -24 if single else 2.0 ** -53
+    return 4.0 * max(box) * eps
+
+
 def check_room(rmax, box, boundary, precision):
     """Refuse a walled scene whose largest circle leaves no room to place it at random: its
     diameter with the placement's clearance (twice PLACE_CLEARANCE of it) and the rounding of a
-    place in the precision (`placement.rounding_margin`, at each wall) must fit the smaller side."""
+    place in the precision (`rounding_margin`, at each wall) must fit the smaller side."""
     w, h = box
-    eps = 2.0 ** -24 if precision == "f32" else 2.0 ** -53
-    rounding = 4.0 * max(box) * eps
+    rounding = rounding_margin(box, precision == "f32")
     if boundary == "walls" and 2 * rmax * (1 + 2 * PLACE_CLEARANCE) + 2 * rounding > min(w, h):
         most = (min(w, h) - 2 * rounding) / (2 * (1 + 2 * PLACE_CLEARANCE))
         most = float(f"{most * (1 - 1e-8):.9g}")  # printed below the limit, not rounded above it

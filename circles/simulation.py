@@ -323,13 +323,13 @@ def check_memory(n: int, scheme: str, precision: str, available=None, record_eve
     available = available_memory() if available is None else available
     if available is None:
         return
+    need = n * per
     log = record_events * LOG_BYTES
-    if n * per + log > available and log > 0:
+    if need + log > available and log > 0:
         raise NotEnoughMemory(
             f"record_events = {record_events} keeps a log of {log / 1e9:.3g} GB ({LOG_BYTES} bytes a collision), "
-            f"which with the {n * per / 1e9:.3g} GB of the circles' arrays is more than the {available / 1e9:.3g} "
-            f"GB of memory available: keep at most {max(available - n * per, 0) // LOG_BYTES} collisions")
-    need = n * per
+            f"which with the {need / 1e9:.3g} GB of the circles' arrays is more than the {available / 1e9:.3g} "
+            f"GB of memory available: keep at most {max(available - need, 0) // LOG_BYTES} collisions")
     if need > available:
         fix = f"at most {available // per} circles"
         if precision == "f64":

@@ -273,7 +273,8 @@ def _remove(path):
     return "removed the file, which would not play"
 
 
-def _frames(count):
+def frames_text(count):
+    """'1 frame', '2 frames'."""
     return f"{count} frame{'s' if count != 1 else ''}"
 
 
@@ -349,7 +350,7 @@ class _Mp4Sink:
         if code == 0:  # ffmpeg finished the file, but a frame could not be sent
             return WriteError(f"cannot send frame {self._frames} to ffmpeg for {self.path} "
                               f"({error.strerror or error}); the file holds the "
-                              f"{_frames(self._frames)} before")
+                              f"{frames_text(self._frames)} before")
         # ffmpeg prefixes a message with the parts that send it: "[out#0/mp4 @ 0x5f...] ".
         messages = [re.sub(r"^(\[[^\]]*\]\s*)+", "", line).strip() for line in messages]
         messages = [line for line in messages if line and not line.startswith("Last message")]
@@ -359,7 +360,7 @@ class _Mp4Sink:
             reason = messages[0]
         else:
             reason = f"exit status {code}"
-        return WriteError(f"ffmpeg failed to write {self.path} after {_frames(self._frames)} "
+        return WriteError(f"ffmpeg failed to write {self.path} after {frames_text(self._frames)} "
                           f"({reason}); {_remove(self.path)}")
 
 
@@ -445,7 +446,7 @@ class _GifSink:
         if self._index == 0:
             return WriteError(f"cannot write {self.path} ({reason}): no frame was written; "
                               f"{_remove(self.path)}")
-        said = f"cannot write {self.path} beyond {_frames(self._index)} ({reason})"
+        said = f"cannot write {self.path} beyond {frames_text(self._index)} ({reason})"
         try:
             os.truncate(self.path, self._end)
             with open(self.path, "ab") as ended:
@@ -488,7 +489,7 @@ class _PngSink:
             if isinstance(error, OSError):
                 raise WriteError(f"cannot write {self.path / name} "
                                  f"({error.strerror or error}); the folder holds the "
-                                 f"{_frames(self._index)} before it") from None
+                                 f"{frames_text(self._index)} before it") from None
             raise
         self._index += 1
 
