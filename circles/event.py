@@ -1137,13 +1137,14 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, speed_out: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
-               r_cut: ti.f64, margin: ti.f64, real: ti.template(), periodic: ti.template(), record: ti.template(),
-               two_level: ti.template(), serial: ti.template(), at_start: ti.template()) -> ti.f64:
+               r_cut: ti.f64, margin: ti.f64, most: ti.i32, real: ti.template(), periodic: ti.template(),
+               record: ti.template(), two_level: ti.template(), serial: ti.template(),
+               at_start: ti.template()) -> ti.f64:
     """A whole step from one queue (see above), every circle moved to its end at the last
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
     -1 when the earliest event is not its partner's (an internal error); -2 when the step
-    executed more than MOST_EVENTS_PER_CIRCLE events per circle (jammed circles). The finish
+    executed more than `most` events (`most_events`: jammed circles). The finish
     leaves the largest speed of the state in speed_out (as `reductions.speed_result` reads it).
 
     `two_level`: the grid's cells are sized for the small circles and the large ones are also
@@ -1185,10 +1186,6 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         for i in range(n):
             if ev_p[i] != NO_EVENT:
                 size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, 0, 0)
-        # Circles jammed in a chain that spans the box, with velocities, collide without end
-        # at one instant; no physical step comes near this many events.
-        most = ti.cast(ti.min(ti.max(ti.cast(n, ti.i64) * MOST_EVENTS_PER_CIRCLE, MOST_EVENTS_ANY_STEP), 1 << 30),
-                       ti.i32)
         reached, horizon = _drain(size, horizon, horizon, reached, most, scale, nb, 0, 0, queue,
                                   (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
                                   (pair_count, virial, wall_count, wall_impulse),

@@ -120,7 +120,17 @@ class State:
     color: np.ndarray
 
 
-def masses_for(model, radius):
+def masses_for(model, radius, precision=None):
+    """The circles' masses from a mass model ("radius", "area", "equal") or (n,) given masses;
+    with a precision, masses whose ratio that precision cannot carry are refused
+    (`check_mass_ratio`)."""
+    mass = _masses(model, radius)
+    if precision is not None:
+        check_mass_ratio(mass, precision)
+    return mass
+
+
+def _masses(model, radius):
     if isinstance(model, str):
         _choice("mass model", model, MASS_MODELS)
         if model == "radius":
@@ -394,7 +404,7 @@ def _read_saved(path):
         check_count("steps", int(d["steps"]))
         check_circles(d["pos"], d["vel"], d["radius"], precision)
         d["color"] = check_colors(d["color"], n)
-        check_mass_ratio(masses_for(d["mass"], d["radius"]), precision)
+        masses_for(d["mass"], d["radius"], precision)
         # A saved state lies inside the walls up to the rounding of its places.
         check_placed(d["pos"], d["radius"], box, str(d["boundary"]), place_slack(precision, box))
     except (ValueError, TypeError) as error:
@@ -542,8 +552,7 @@ class Simulation:
         angle = rng.uniform(0.0, 2.0 * np.pi, n)
         vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
         color = random_colors(n, rng)
-        mass = masses_for(scene.mass, radius)
-        check_mass_ratio(mass, scene.precision)
+        mass = masses_for(scene.mass, radius, scene.precision)
         fraction = float(np.sum(np.pi * radius ** 2)) / (scene.box[0] * scene.box[1])
         check_area_fraction(fraction, n, scene.box)
         periodic = scene.boundary == "periodic"
@@ -571,8 +580,7 @@ class Simulation:
         pos = np.asarray(pos, dtype=np.float64)
         vel = np.asarray(vel, dtype=np.float64)
         check_circles(pos, vel, radius, precision)
-        mass = masses_for("radius" if mass is None else mass, radius)
-        check_mass_ratio(mass, precision)
+        mass = masses_for("radius" if mass is None else mass, radius, precision)
         check_placed(pos, radius, box, boundary, 0.0)
         if boundary == "periodic":
             pos = pos % np.array(box)
@@ -1095,7 +1103,8 @@ class Simulation:
                                    self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
-                                   self._log_j, self._speed_out, *levels, real, periodic, record, two,
+                                   self._log_j, self._speed_out, *levels, event.most_events(self.n), real,
+                                   periodic, record, two,
                                    self._serial, at_start)
         self.rounds += 1
         # queue_step's finish left the largest speed in _speed_out; its return synchronised.

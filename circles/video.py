@@ -214,7 +214,8 @@ class FrameWriter:
 
     Use as a context manager, or call ``close()``. ``frames`` counts the frames written.
     A `WriteError` from ``write`` or ``close`` has already finished (or, for an MP4 that
-    cannot play, removed) the file: the writer is closed.
+    cannot play, removed) the file: the writer is closed. A frame whose ``write`` is stopped
+    midway (a KeyboardInterrupt) is left out of the file that ``close`` finishes.
     """
 
     def __init__(self, path, fps, frames=None):
@@ -371,8 +372,8 @@ class _GifSink:
     flicker from frame to frame; pixels map to their nearest palette colour, undithered
     (dithering would add noise that moves every frame).
 
-    When a write fails, the file is cut back to the end of the last whole frame and ended
-    there, so that the frames before the failure stay readable."""
+    When a write fails, or stops midway (Ctrl-C), the file is cut back to the end of the last
+    whole frame and ended there, so that the frames before stay readable."""
 
     def __init__(self, path, fps):
         self.path = path
@@ -427,6 +428,9 @@ class _GifSink:
     def close(self):
         if self._file is not None:
             try:
+                # Past the last whole frame, in case a frame's writing was cut (Ctrl-C).
+                self._file.seek(self._end)
+                self._file.truncate()
                 self._file.write(b";")  # the trailer
                 self._file.flush()
             except OSError as error:

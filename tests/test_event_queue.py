@@ -439,18 +439,21 @@ def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypa
     if queue and TEST_ARCH != "cpu":
         pytest.skip("the queue runs on a CPU only")
     monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
-    if not queue:
-        # The rounds read the limit at every check: a lower one keeps the test short (each
-        # round executes a few of the jam's events).
-        monkeypatch.setattr(event, "MOST_EVENTS_PER_CIRCLE", 100)
-        monkeypatch.setattr(event, "MOST_EVENTS_ANY_STEP", 100)
+    # Both read the limit at every step (`event.most_events`): a lower one keeps the test short
+    # (each round executes a few of the jam's events).
+    monkeypatch.setattr(event, "MOST_EVENTS_PER_CIRCLE", 100)
+    monkeypatch.setattr(event, "MOST_EVENTS_ANY_STEP", 100)
     pos, vel, radius, box = lattice_head_on(3)
     sim = circles_cpu.Simulation.from_arrays(pos, vel, 2 * radius, box=box, scheme="event", precision="f64")
     assert sim.stats()["max_overlap"] <= 1e-12  # touching, not overlapping
     with pytest.raises(RuntimeError, match=f"more than {event.most_events(sim.n)} events .*"
                                            "jammed.*scheme='discrete'.*shorter dt"):
         sim.step(1)
-    if not queue:
+    if queue:
+        # It stopped at the first event past the limit it was given.
+        stats = sim.stats()
+        assert stats["pair_collisions"] + stats["wall_collisions"] == event.most_events(sim.n) + 1
+    else:
         # It stopped at the first check past the limit: the checks double, so fewer than twice
         # the rounds that the limit's events need at one event a round.
         assert simulation.JAM_CHECK_ROUNDS <= sim.rounds <= 2 * event.most_events(sim.n)

@@ -178,6 +178,47 @@ def test_a_png_frame_is_whole_or_absent(tmp_path, monkeypatch, stop):
     assert os.listdir(folder) == ["frame_00000.png"]
 
 
+class _CutOnce:
+    """A file (or ffmpeg's input) whose next write stops halfway with a Ctrl-C."""
+
+    def __init__(self, real):
+        self.real, self.cut = real, False
+
+    def write(self, data):
+        if not self.cut:
+            self.cut = True
+            data = memoryview(data).cast("B")
+            self.real.write(data[:len(data) // 2])
+            self.real.flush()
+            raise KeyboardInterrupt
+        return self.real.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self.real, name)
+
+
+@pytest.mark.parametrize("name", ["cut.mp4", "cut.gif"])
+def test_a_frame_cut_by_ctrl_c_is_left_out_and_the_file_plays(tmp_path, name):
+    """Ctrl-C in a program's own loop can stop `write` halfway through a frame's bytes; the
+    file that `close` finishes holds the whole frames before it, and plays."""
+    path = tmp_path / name
+    written = frames(4)
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(path, FPS) as writer:
+            for frame in written[:3]:
+                writer.write(frame)
+            if name.endswith(".mp4"):
+                writer._sink._process.stdin = _CutOnce(writer._sink._process.stdin)
+            else:
+                writer._sink._file = _CutOnce(writer._sink._file)
+            writer.write(written[3])
+    assert writer.frames == 3
+    got = read_back(path)
+    assert got.shape == (3, 64, 96, 3)
+    if name.endswith(".gif"):
+        assert (got == np.stack(written[:3])).all()
+
+
 def test_gif_loops_and_keeps_the_frame_rate(tmp_path):
     path = tmp_path / "loop.gif"
     with FrameWriter(path, 25) as writer:
