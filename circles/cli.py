@@ -98,7 +98,7 @@ def _build_parser():
     run.add_argument("scene", nargs="?", metavar="SCENE.toml",
                      help="scene file: Scene fields (or [[circle]] tables listing the "
                           "circles) at top level, a [run] table for the run options")
-    scene = run.add_argument_group("scene")
+    scene = run.add_argument_group("scene", _scene_defaults_text())
     scene.add_argument("--n", type=int, help="number of circles")
     scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
     scene.add_argument("--radius", type=float, nargs="+", metavar="R",
@@ -130,6 +130,20 @@ def _build_parser():
                         help=f"*.mp4, *.gif, or a folder for PNG frames (default "
                              f"{DEFAULT_OUT})")
     return parser
+
+
+def _scene_defaults_text():
+    """What the scene flags default to, for --help."""
+    from .scene import Scene
+
+    def text(fields):
+        return ", ".join(f"{name} {' '.join(f'{x:g}' for x in value) if isinstance(value, (list, tuple)) else value}"
+                         for name, value in fields.items())
+
+    fields = {name: getattr(Scene, name) for name in Scene.__dataclass_fields__}
+    fields["dt"] = "chosen from the scene"
+    return (f"Without SCENE.toml, the showcase: {text(SHOWCASE_SCENE)}. A field that the showcase or "
+            f"the file leaves out, and no flag sets, takes Scene's default: {text(fields)}.")
 
 
 def _scene_overrides(args):
