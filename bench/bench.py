@@ -1,13 +1,20 @@
 """Benchmark of circles: throughput, the memory-bandwidth bound, the pymunk peer, work-precision.
 
-    python bench/bench.py [--quick] [--arch cpu|gpu] [--out outputs/bench]
+    python bench/bench.py [--quick] [--arch cpu|gpu] [--out outputs/bench] [--skip SECTION,...]
 
 Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
-throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, peers.csv, work_precision.csv,
-results.md (every table, with the command and the date) and work_precision.png. The tables
-are rewritten after every section, so a run stopped early leaves what it measured. With
---arch gpu the sizes go up to 1e8 in float32, and the pymunk, memory and work-precision
-sections are left out (see GPU below).
+throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, memory.csv, spread.csv,
+peers.csv, work_precision.csv, results.md (every table, with the command and the date) and
+work_precision.png. A run first removes these files from that folder, so that the folder never
+mixes two runs (a section skipped or failed leaves no file of an older run). The tables are
+rewritten after every section, so a run stopped early leaves what it measured. With --arch gpu
+the sizes go up to 1e8 in float32, and the pymunk, memory and work-precision sections are left
+out (see GPU below).
+
+`<out>` is outputs/bench by default (the results kept with the project). A run with --quick
+(smaller sizes: up to 1e5 circles) or with --skip is no full run: unless --out is given it
+writes to a scratch folder, `circles-bench-quick` in the system's temporary folder (QUICK_OUT),
+and says where.
 
 What is measured, all in one run and one process:
 
@@ -59,6 +66,7 @@ import re
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -92,20 +100,28 @@ QUICK = dict(
     peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000), render_reps=3,
     copy_numbers=1 << 25, copy_reps=5,
     wp_n=500, wp_duration_mft=10.0, wp_factors=(0.01, 0.04, 0.15, 0.5, 2.0),
-    memory_sizes=(1_000_000,), spread_sizes=(10_000,))
+    memory_sizes=(100_000,), spread_sizes=(10_000,), placement_n=100_000)
 FULL = dict(
     sizes=(1_000, 10_000, 100_000, 1_000_000), event_sizes=(1_000, 10_000, 100_000, 1_000_000), reps=5,
     target=1.0, peer_sizes=(1_000, 10_000, 100_000), dense_sizes=(300, 1_000, 3_000), render_reps=5,
     copy_numbers=1 << 27, copy_reps=10,
     wp_n=2000, wp_duration_mft=20.0, wp_factors=(0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0),
-    memory_sizes=(1_000_000, 10_000_000), spread_sizes=(10_000, 100_000))
+    memory_sizes=(1_000_000, 10_000_000), spread_sizes=(10_000, 100_000), placement_n=1_000_000)
 #: With --arch gpu: sizes up to 1e8 in float32, no pymunk (a CPU peer), no
 #: resident-memory rows (they measure host memory) and no work-precision (a CPU-size study).
 GPU = dict(
     sizes=(10_000, 100_000, 1_000_000, 10_000_000, 100_000_000), event_sizes=(100_000, 1_000_000, 10_000_000),
     precisions=("f32",), reps=5, target=0.5, peer_sizes=(), dense_sizes=(1_000, 10_000), render_reps=5,
     copy_numbers=1 << 28, copy_reps=20, memory_sizes=(), spread_sizes=(1_000_000, 10_000_000),
-    skip=("peers", "wp", "memory"))
+    placement_n=1_000_000, skip=("peers", "wp", "memory"))
+#: The sections a run can leave out (--skip).
+SECTIONS = ("throughput", "placement", "memory", "spread", "peers", "wp")
+#: The files a run writes into `<out>/<machine>/` (and removes there first).
+OUTPUT_FILES = ("bandwidth.csv", "throughput.csv", "placement.csv", "render.csv", "compile.csv", "peers.csv",
+                "work_precision.csv", "memory.csv", "spread.csv", "results.md", "work_precision.png")
+#: Default --out: the results kept with the project; QUICK_OUT for --quick or --skip runs.
+FULL_OUT = os.path.join("outputs", "bench")
+QUICK_OUT = os.path.join(tempfile.gettempdir(), "circles-bench-quick")
 
 
 def now():
@@ -288,8 +304,9 @@ def measure_render(sim, reps, width=1920, height=1080):
                 frame_s_min=s["min"], frame_s_max=s["max"])
 
 
-#: Placement rows at a million circles, float32: (area fraction, repeats); one or two repeats keep the run short.
-PLACEMENT_MILLION = ((0.5, 2), (0.8, 1))
+#: Placement rows of the largest scene (`placement_n` circles: 1e6, 1e5 with --quick), float32: (area
+#: fraction, repeats); one or two repeats keep the run short.
+PLACEMENT_LARGE = ((0.5, 2), (0.8, 1))
 
 
 def measure_placement(n, fraction, reps, aspect=ASPECT, precision="f64"):
@@ -800,24 +817,68 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
 
 
 # ---------------------------------------------------------------------- main
-def main(argv=None):
+def parse_args(argv=None):
+    """The command line, checked before anything is compiled or measured."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="smaller sizes, a few minutes on a 2-core CPU")
-    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
-    ap.add_argument("--out", default="outputs/bench")
-    ap.add_argument("--skip", default="", help="comma list of sections to skip: "
-                    "throughput,placement,memory,spread,peers,wp")
+    ap.add_argument("--quick", action="store_true",
+                    help="smaller sizes (up to 1e5 circles), a few minutes on a 2-core CPU; writes to the scratch "
+                         f"folder {QUICK_OUT} unless --out is given")
+    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu", help="where the kernels run (default: cpu)")
+    ap.add_argument("--out", default=None,
+                    help=f"folder of the results, a subfolder per machine (default: {FULL_OUT}; with --quick or "
+                         f"--skip: {QUICK_OUT})")
+    ap.add_argument("--skip", default="", help=f"comma list of sections to skip: {','.join(SECTIONS)} (default: "
+                    f"none); writes to {QUICK_OUT} unless --out is given")
     args = ap.parse_args(argv)
+    args.skip = set(filter(None, (name.strip() for name in args.skip.split(","))))
+    unknown = sorted(args.skip - set(SECTIONS))
+    if unknown:
+        ap.error(f"--skip {','.join(unknown)}: no such section; the sections are {','.join(SECTIONS)}")
+    if args.out is None:
+        args.out = QUICK_OUT if args.quick or args.skip else FULL_OUT
+    return ap, args
+
+
+def check_folder(ap, outdir):
+    """Make `outdir`; a folder that cannot be written is a command-line error, found before any work."""
+    try:
+        os.makedirs(outdir, exist_ok=True)
+    except OSError as e:
+        ap.error(f"--out: cannot make {outdir} ({e.strerror}): give a folder you can write to")
+    if not os.access(outdir, os.W_OK | os.X_OK):
+        ap.error(f"--out: cannot write into {outdir}: give a folder you can write to")
+
+
+def clear_folder(outdir):
+    """Remove the files an earlier run wrote into `outdir` (OUTPUT_FILES): the folder then holds
+    this run's results only, also where this run skips a section or a section fails."""
+    removed = []
+    for name in OUTPUT_FILES:
+        path = os.path.join(outdir, name)
+        if os.path.isfile(path):
+            os.remove(path)
+            removed.append(name)
+    return removed
+
+
+def main(argv=None):
+    ap, args = parse_args(argv)
     start = now()
-    arch = circles.init(arch=args.arch)
-    cfg = QUICK if args.quick else GPU if arch == "gpu" else FULL
-    skip = set(filter(None, args.skip.split(","))) | set(cfg.get("skip", ()))
-    precisions = cfg.get("precisions", PRECISIONS)
-    machine_name = cpu_model() if arch == "cpu" else gpu_model()
+    # The machine's name (the subfolder) needs the arch only: the GPU's name comes from nvidia-smi,
+    # so the folder is checked before Taichi starts.
+    machine_name = cpu_model() if args.arch == "cpu" else gpu_model()
     outdir = os.path.join(args.out, slug(machine_name))
-    os.makedirs(outdir, exist_ok=True)
+    check_folder(ap, outdir)
+    arch = circles.init(arch=args.arch)
+    removed = clear_folder(outdir)
+    cfg = QUICK if args.quick else GPU if arch == "gpu" else FULL
+    skip = args.skip | set(cfg.get("skip", ()))
+    precisions = cfg.get("precisions", PRECISIONS)
     errors = []
-    log(f"circles benchmark on {machine_name} ({arch}), writing {outdir}")
+    scratch = " (a scratch folder: give --out to keep the results elsewhere)" if args.out == QUICK_OUT else ""
+    log(f"circles benchmark on {machine_name} ({arch}), writing {outdir}{scratch}")
+    if removed:
+        log(f"  removed the earlier run's {', '.join(removed)} there")
 
     def guarded(what, fn, *a, **kw):
         try:
@@ -831,7 +892,8 @@ def main(argv=None):
     log("bandwidth")
     bandwidth = measure_bandwidth(cfg["copy_numbers"], cfg["copy_reps"])
     bw = bandwidth[0]["gbps_best"] * 1e9
-    log(f"  taichi copy {bandwidth[0]['gbps_best']:.2f} GB/s best, numpy {bandwidth[1]['gbps_best']:.2f} GB/s")
+    log("  " + ", ".join(f"{b['method']} {b['gbps_best']:.2f} GB/s best, median {b['gbps_median']:.2f} "
+                         f"[{b['gbps_min']:.2f}, {b['gbps_best']:.2f}]" for b in bandwidth))
 
     # Compile the placement and step kernels on a small scene first, so that the first row does
     # not carry every compilation.
@@ -894,7 +956,8 @@ def main(argv=None):
                         r = guarded(f"render N={n}", measure_render, sim, cfg["render_reps"])
                         if r:
                             render.append(r)
-                            log(f"  render N={n}: {r['frame_s_median']:.3g} s per 1920x1080 frame")
+                            log(f"  render N={n}: {r['frame_s_median']:.3g} s per 1920x1080 frame "
+                                f"[{r['frame_s_min']:.3g}, {r['frame_s_max']:.3g}]")
                     del sim
                     save(f"throughput N={n} {scheme} {precision}")
         # Placement at 0.3: every throughput row built its scene (same seed, so the same placement).
@@ -916,9 +979,10 @@ def main(argv=None):
             if p:
                 placement.append(p)
                 log(f"  N={n}: {p['place_s_median']:.3g} s")
-        log("placement of a million circles")
-        for fraction, reps in PLACEMENT_MILLION:
-            p = guarded(f"placement N=1000000 fraction {fraction}", measure_placement, 1_000_000, fraction, reps,
+        n = cfg["placement_n"]
+        log(f"placement of {n} circles")
+        for fraction, reps in PLACEMENT_LARGE:
+            p = guarded(f"placement N={n} fraction {fraction}", measure_placement, n, fraction, reps,
                         precision="f32")
             if p:
                 placement.append(p)
@@ -957,9 +1021,11 @@ def main(argv=None):
             p, side = measured
             peers.append(p)
             ratios.extend(side)
-            log(f"  N={n:>8} pymunk: {p['circle_steps_per_s_median']:.3g} circle-steps/s, energy change "
+            log(f"  N={n:>8} pymunk: {p['circle_steps_per_s_median']:.3g} circle-steps/s "
+                f"[{p['circle_steps_per_s_min']:.3g}, {p['circle_steps_per_s_max']:.3g}], energy change "
                 f"{p['energy_rel_change']:.2g}, overlap {p['max_overlap']:.2g}; circles / pymunk: "
-                + ", ".join(f"{r['scheme']} {r['precision']} {r['circle_steps_ratio']:.3g}x" for r in side))
+                + ", ".join(f"{r['scheme']} {r['precision']} {r['circle_steps_ratio']:.3g}x "
+                            f"[{r['ratio_min']:.3g}, {r['ratio_max']:.3g}]" for r in side))
 
     save("peers")
     if "wp" not in skip:

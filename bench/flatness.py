@@ -10,7 +10,7 @@ cells, grows over the first tens of steps). Then each round times one step of th
 scene and largest / N steps of each smaller one, which take about as long, so that the load
 of a shared machine falls on all alike. Reported: the median circle-steps/s of each N with
 [min, max] and its cost per circle-step relative to the largest N's (above 1: dearer), and
-the spread of the costs, the dearest N's over the cheapest's (the issue's flatness: at most
+the spread of the costs, the dearest N's over the cheapest's (the flatness target: at most
 1.5 from 1e4 to 1e6), as the ratio of the medians and, with quartiles, as the median over
 rounds of the same ratio of each round's speeds (noisier: the slowest and fastest of one
 round's speeds).
@@ -31,11 +31,14 @@ from kernel_profile import bench_scene  # noqa: E402
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scheme", choices=("event", "discrete"), default="event")
-    parser.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
-    parser.add_argument("--warm", type=int, default=60, help="steps of each scene before the timed ones")
-    parser.add_argument("--rounds", type=int, default=30)
-    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
+    parser.add_argument("--scheme", choices=("event", "discrete"), default="event",
+                        help="scheme of every scene (default: event)")
+    parser.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000],
+                        help="circles of each scene, two or more (default: 10000 100000 1000000)")
+    parser.add_argument("--warm", type=int, default=60,
+                        help="steps of each scene before the timed ones (at least 16; default: 60)")
+    parser.add_argument("--rounds", type=int, default=30, help="rounds, each timing every scene once (default: 30)")
+    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu", help="where the kernels run (default: cpu)")
     args = parser.parse_args()
     ns = sorted(set(args.n))
     if len(ns) < 2 or ns[0] < 1:

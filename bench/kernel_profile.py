@@ -6,7 +6,8 @@
 The bench scene (radius 0.5, area fraction 0.3, 16:9 walled box, speeds 0.5 to 1, float32,
 default dt). For each N and scheme: the scene is built and warmed up by `--warm` steps (2 by
 default; 60 to profile a relaxed scene, as bench.py's throughput rows time), then
-`steps` steps are timed one by one without the profiler (median and best circle-steps/s),
+`steps` steps are timed one by one without the profiler (circle-steps/s: the median with
+[min, max] over the steps),
 then `steps` more with it, and the profiler's table is printed: each row one offloaded task
 of a kernel (on the GPU a task is one device kernel; `serial` tasks run on one thread),
 with its calls and total time. The profiler adds a synchronisation per task, so the timed
@@ -54,8 +55,10 @@ def profile(n, scheme, steps, warm=2):
     sim.step(warm)
     rounds0 = sim.rounds
     times, pairs, energy_change, overlap = time_steps(sim, steps)
-    print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {n / np.median(times) / 1e6:.3g} M circle-steps/s median, "
-          f"{n / times.min() / 1e6:.3g} M best; {pairs / (n * steps):.3g} collisions per circle-step; "
+    rates = n / times / 1e6
+    print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {np.median(rates):.3g} M circle-steps/s median "
+          f"[{rates.min():.3g}, {rates.max():.3g}] over {steps} steps; {pairs / (n * steps):.3g} collisions per "
+          "circle-step; "
           f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change {energy_change:.2e}; "
           f"largest overlap {overlap:.2e}", flush=True)
     ti.profiler.clear_kernel_profiler_info()
@@ -70,12 +73,19 @@ def profile(n, scheme, steps, warm=2):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
-    ap.add_argument("--n", type=float, nargs="+", default=[1e6])
-    ap.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=("discrete", "event"))
-    ap.add_argument("--steps", type=int, default=20)
-    ap.add_argument("--warm", type=int, default=2, help="steps before the timed ones (at least 1)")
+    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu", help="where the kernels run (default: cpu)")
+    ap.add_argument("--n", type=float, nargs="+", default=[1e6], help="circles, one scene each (default: 1e6)")
+    ap.add_argument("--scheme", nargs="+", default=["discrete", "event"], choices=("discrete", "event"),
+                    help="schemes, one scene each (default: discrete event)")
+    ap.add_argument("--steps", type=int, default=20,
+                    help="steps timed, and then steps profiled (at least 1; default: 20)")
+    ap.add_argument("--warm", type=int, default=2, help="steps before the timed ones (at least 1; default: 2)")
     args = ap.parse_args(argv)
+    bad = [f"{n:g}" for n in args.n if not (n >= 1 and n.is_integer())]
+    if bad:
+        ap.error(f"--n {' '.join(bad)}: give whole numbers of circles, 1 or more (1e6 or 1000000)")
+    if args.steps < 1:
+        ap.error(f"--steps {args.steps}: give at least 1 step to time")
     if args.warm < 1:
         ap.error(f"--warm {args.warm}: give at least 1 (the first step compiles)")
     arch = circles.init(arch=args.arch, kernel_profiler=True)

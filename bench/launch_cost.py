@@ -1,14 +1,16 @@
 """What a kernel call costs on a CPU besides its kernel: Python's work and Taichi's launch.
 
-    python bench/launch_cost.py [--calls 5000]
+    python bench/launch_cost.py [--calls 5000] [--runs 5]
 
 Kernels that do (almost) nothing, with 1 and with 30 ndarray arguments (and two scalars), each
 called `calls` times in a row through circles' fast calls (`circles/launch.py`) and through
-Taichi's own call; microseconds per call, the best of three runs. Then the share of Taichi's
+Taichi's own call; microseconds per call, the median with [min, max] over `runs` runs (the
+least is the cost on a quiet machine, the spread what a shared one adds). Then the share of Taichi's
 launch alone (the C++ call that the fast path ends in), from the same calls timed without
 the Python around them.
 """
 import argparse
+import statistics
 import time
 
 import taichi as ti
@@ -31,41 +33,52 @@ def thirty_arrays(a0: nd, a1: nd, a2: nd, a3: nd, a4: nd, a5: nd, a6: nd, a7: nd
     return 1
 
 
-def per_call(fn, args, calls):
-    """Best of three runs of `calls` calls, microseconds per call."""
+def per_call(fn, args, calls, runs):
+    """Microseconds per call in each of `runs` runs of `calls` calls (after two calls that compile)."""
     fn(*args)
     fn(*args)
-    best = float("inf")
-    for _ in range(3):
+    times = []
+    for _ in range(runs):
         t0 = time.perf_counter()
         for _ in range(calls):
             fn(*args)
-        best = min(best, time.perf_counter() - t0)
-    return best / calls * 1e6
+        times.append((time.perf_counter() - t0) / calls * 1e6)
+    return times
+
+
+def spread(times):
+    """'median [min, max]' of microseconds."""
+    return f"{statistics.median(times):6.2f} [{min(times):.2f}, {max(times):.2f}]"
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--calls", type=int, default=5000)
+    parser.add_argument("--calls", type=int, default=5000, help="calls per run (at least 1; default: 5000)")
+    parser.add_argument("--runs", type=int, default=5, help="runs of each kind of call (at least 1; default: 5)")
     args = parser.parse_args()
+    if args.calls < 1:
+        parser.error(f"--calls {args.calls}: give 1 or more calls per run (thousands for a steady figure)")
+    if args.runs < 1:
+        parser.error(f"--runs {args.runs}: give 1 or more runs")
     circles.init(arch="cpu")
     program = ti.lang.impl.get_runtime().prog
-    print(f"microseconds per call, best of 3 x {args.calls} calls")
+    print(f"microseconds per call, median [min, max] over {args.runs} runs of {args.calls} calls")
     for name, fn, count in (("1 array", one_array, 1), ("30 arrays", thirty_arrays, 30)):
         arrays = [ti.ndarray(ti.f64, shape=4) for _ in range(count)]
         call_args = arrays + [1.0, 2.0]
         fast = launch.kernel(fn)
         plain = ti.kernel(fn)
-        fast_us = per_call(fast, call_args, args.calls)
-        plain_us = per_call(plain, call_args, args.calls)
+        fast_us = per_call(fast, call_args, args.calls, args.runs)
+        plain_us = per_call(plain, call_args, args.calls, args.runs)
         # The fast path's binding for these arrays: its context and the kernel it launches
         # (an engine whose bindings keep no kernel, an older one, has no such column).
         binding = next(iter(fast._bindings.values()))
         alone = ""
         if hasattr(binding, "launchable"):
-            launch_us = per_call(lambda: program.launch_kernel(binding.launchable, binding.ctx), (), args.calls)
-            alone = f"   of which Taichi's launch alone {launch_us:6.1f}"
-        print(f"  {name:10s} fast call {fast_us:6.1f}   Taichi's call {plain_us:6.1f}{alone}")
+            launch_us = per_call(lambda: program.launch_kernel(binding.launchable, binding.ctx), (), args.calls,
+                                 args.runs)
+            alone = f"   of which Taichi's launch alone {spread(launch_us)}"
+        print(f"  {name:10s} fast call {spread(fast_us)}   Taichi's call {spread(plain_us)}{alone}")
 
 
 if __name__ == "__main__":

@@ -141,3 +141,16 @@ def max_overlap(pos, radius, box):
         overlap = (s - np.sqrt((d * d).sum(axis=1))) / s
         best = max(best, float(overlap.max()))
     return max(best, 0.0)
+
+
+if __name__ == "__main__":
+    import sys
+
+    _USE = ("peer_pymunk.py is a module used by bench/bench.py (its peers and work-precision sections), not a "
+            "command: run the pymunk rows with `python bench/bench.py --skip throughput,placement,memory,spread,wp` "
+            "(add --quick for smaller sizes)")
+    if sys.argv[1:] in (["-h"], ["--help"]):
+        print(_USE)
+        sys.exit(0)
+    print(f"usage: {_USE}", file=sys.stderr)
+    sys.exit(2)

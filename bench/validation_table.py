@@ -12,6 +12,7 @@ step). Errors are the standard errors of the block means.
 import argparse
 import os
 import sys
+import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -41,10 +42,32 @@ def measure(eta, scheme, seed=1):
     return m
 
 
+def check_out(ap, path):
+    """Make the folder of `path` (none for a bare file name) and check that `path` can be written,
+    before the runs: a bad path is a command-line error, not a crash after minutes of measuring."""
+    folder = os.path.dirname(path)
+    try:
+        if folder:
+            os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        ap.error(f"--out {path}: cannot make the folder {folder} ({e.strerror}): give a path you can write to")
+    if os.path.isdir(path):
+        ap.error(f"--out {path} is a folder: give a file name, e.g. {os.path.join(path, 'validation.md')}")
+    try:
+        if os.path.exists(path):
+            open(path, "a").close()  # opened to append, not changed
+        else:
+            tempfile.TemporaryFile(dir=folder or ".").close()
+    except OSError as e:
+        ap.error(f"--out {path}: cannot write there ({e.strerror}): give a path you can write to")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join("outputs", "bench", "validation.md"))
+    ap.add_argument("--out", default=os.path.join("outputs", "bench", "validation.md"),
+                    help="the markdown table (default: %(default)s)")
     args = ap.parse_args()
+    check_out(ap, args.out)
     circles.init(arch="cpu")
     rows = ["| eta | scheme | dt | Z | Liu Z | Z error | collision rate | Enskog | rate error | pairs | max overlap "
             "| wall s |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -61,7 +84,6 @@ def main():
     text = "\n".join(["# Hard-disk validation: both schemes against Liu and Enskog", "",
                       f"Command: `python bench/validation_table.py`. {__doc__.split(chr(10), 3)[3].strip()}", "",
                       *rows, ""])
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         f.write(text)
     print(f"wrote {args.out}")
