@@ -69,6 +69,38 @@ def test_unequal_masses_follow_1d_formula(circles_cpu, scheme):
         assert s.pos[:, 0] == pytest.approx([x1, x2], abs=1e-14)
 
 
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+@pytest.mark.parametrize("small_first", [True, False])
+def test_virial_of_unequal_radii_counts_both(circles_cpu, scheme, small_first):
+    """Head on along x, equal masses closing at 2: |J| = 2, and the virial adds (r_i + r_j)|J|
+    = (0.05 + 0.10) 2 = 0.3, with both radii whichever circle comes first. The normal is exactly
+    (1, 0), so a few roundings (of the contact distance and the impulse) enter: 1e-14."""
+    pos, vel, radius = [[0.3, 0.5], [0.7, 0.5]], [[1.0, 0.0], [-1.0, 0.0]], [0.05, 0.10]
+    k = [0, 1] if small_first else [1, 0]
+    sim = two(circles_cpu, [pos[i] for i in k], [vel[i] for i in k], [1.0, 1.0], scheme=scheme, dt=0.01,
+              radius=[radius[i] for i in k])
+    sim.advance(0.3)
+    st = sim.stats()
+    assert st["pair_collisions"] == 1
+    assert st["virial"] == pytest.approx(0.3, rel=1e-14)
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+@pytest.mark.parametrize("mass", [3.0, 0.3])
+def test_wall_impulse_is_twice_mass_times_normal_speed(circles_cpu, scheme, mass):
+    """One circle of mass 3 (or 0.3: masses whose inverse is no power of two, so an impulse
+    formed with the inverse mass in place of the mass shows) hits the wall x = W once at speed
+    2: the wall impulse is 2 m |v_n| = 12 m / 3, to a few roundings."""
+    sim = circles_cpu.Simulation.from_arrays(np.array([[5.0, 5.0]]), np.array([[2.0, 0.0]]), np.array([1.0]),
+                                             mass=np.array([mass]), box=(10.0, 10.0), scheme=scheme,
+                                             precision="f64", dt=0.01)
+    sim.advance(3.0)
+    st = sim.stats()
+    assert st["wall_collisions"] == 1
+    assert st["wall_impulse"] == pytest.approx(2.0 * mass * 2.0, rel=1e-14)
+    assert sim.state().vel[0] == pytest.approx([-2.0, 0.0], abs=1e-15)
+
+
 def test_glancing_equal_masses_leave_at_right_angles(circles_cpu):
     """Equal masses, target at rest, impact parameter b = s / 2: at contact the
     normal makes 30 degrees with x, the target leaves along it with speed
@@ -260,6 +292,24 @@ def test_discrete_exact_tie_goes_to_the_lower_id(circles_cpu, left_id_lower):
     assert np.abs(np.subtract(expected, other)).max() > 0.3
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13)
     assert sim.state().vel[:, 1].tolist() == [0.0, 0.0, 0.0]
+
+
+def test_discrete_resolves_the_pair_that_touched_first(circles_cpu):
+    """Within one step two circles reach a middle one: the left pair overlaps more at the step's
+    end (0.004 against 0.0018) but touched later (0.006 after the step's start, at closing speed
+    1), the right pair touched first (0.001, at closing speed 0.2). The discrete scheme picks
+    by how long ago a pair touched (overlap over approach speed), so the right pair goes first,
+    as in the event scheme; with masses 1, 2 and 3 the other order ends 0.27 away in velocity.
+    Along x the impulses are exact but for a few roundings: 1e-14."""
+    r, v, m = 0.05, [1.0, 0.0, -0.2], [1.0, 2.0, 3.0]
+    x = [0.5 - 2 * r - 0.006, 0.5, 0.5 + 2 * r + 0.0002]
+    right_first, left_first = _rounds_in_a_row(v, m, 1), _rounds_in_a_row(v, m, 0)
+    assert np.abs(np.subtract(right_first, left_first)).max() > 0.25
+    for scheme in ("discrete", "event"):
+        sim = two(circles_cpu, [[xk, 0.5] for xk in x], [[vk, 0.0] for vk in v], m, scheme=scheme, dt=0.01,
+                  radius=(r, r, r))
+        sim.step(1)
+        np.testing.assert_allclose(sim.state().vel[:, 0], right_first, rtol=0, atol=1e-14, err_msg=scheme)
 
 
 def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):

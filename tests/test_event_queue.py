@@ -111,6 +111,40 @@ def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
         assert queue.cut_steps > 0
 
 
+@pytest.mark.parametrize("queue", [True, False], ids=["queue", "rounds"])
+def test_a_neighbour_that_turns_back_bounds_the_rounds(circles_cpu, monkeypatch, queue):
+    """Three circles of radius 0.1 in a row along y = 5: l (x = 0.3) and k (x = 1.5) move left at
+    1, m a little above k's row catches k up at 1.5. l hits the wall x = 0 at 0.2 and comes back
+    at 1, so l and k meet at 0.7 (k then moves right at 1) and k meets m at 0.71. Before l's
+    wall hit, k's own earliest event is m's at 0.75: a round that executes it with l's hit treats
+    l as if it kept its course. A bound on when a neighbour can reach a circle must let the
+    neighbour's velocity reverse (deviate at 2 vlim, not vlim). Times held to 1e-12 (a few
+    roundings of numbers near 1); on a CPU the rounds must also equal the queue bit for bit."""
+    from circles import simulation
+
+    if queue and TEST_ARCH != "cpu":
+        pytest.skip("the queue runs on a CPU only")
+
+    def run(on_queue):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", on_queue)
+        sim = circles_cpu.Simulation.from_arrays(
+            np.array([[0.3, 5.0], [1.5, 5.0], [2.0482050807568877, 5.1]]),
+            np.array([[-1.0, 0.0], [-1.0, 0.0], [-1.5, 0.0]]), np.full(3, 0.1), mass="equal", box=(20.0, 10.0),
+            scheme="event", precision="f64", dt=2.0, record_events=100)
+        sim.advance(1.0)
+        return sim
+
+    sim = run(queue)
+    got = sim.events()
+    assert got[:, 1:].tolist() == [[0, -1], [0, 1], [1, 2]]
+    np.testing.assert_allclose(got[:, 0], [0.2, 0.7, 0.71], rtol=0, atol=1e-12)
+    if not queue and TEST_ARCH == "cpu":
+        other = run(True)
+        assert np.array_equal(sim.state().vel, other.state().vel)
+        assert np.array_equal(sim.state().pos, other.state().pos)
+        assert np.array_equal(got, other.events())
+
+
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name", ["walls-f32-equal", "periodic-f32-dense", "periodic-f64-area"])
 def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):

@@ -138,6 +138,38 @@ def test_pair_time_of_impact_matches_the_reference_in_every_case(circles_cpu, se
 
 
 @pytest.mark.parametrize("real", ["f32", "f64"])
+def test_a_hair_apart_the_time_keeps_its_precision(circles_cpu, real):
+    """Two circles of radius 1/2 a gap g = 2^-k apart along x, closing at 1 with a sideways speed
+    2^-q: b^2 is about 1 / (2 g) times a c, so the root (-b - sqrt(disc)) / a would lose k bits
+    to cancellation; c / (-b + sqrt(disc)) keeps the precision's own. The inputs are chosen so
+    that a, b and c are exact (few bits), so the time's only errors are the roundings of disc,
+    its root, one sum and one quotient: within 8 epsilons of the exact time (computed here with
+    50 digits), where the cancelling root is off by 2^k epsilons."""
+    from decimal import Decimal, getcontext
+    from fractions import Fraction
+
+    getcontext().prec = 50
+    dtype, eps, ks, qs = ((np.float64, 2.0 ** -52, range(16, 27), (4, 10, 16)) if real == "f64"
+                          else (np.float32, 2.0 ** -23, range(6, 12), (2, 3, 4)))
+    cases = [(k, q) for k in ks for q in qs]
+    m = len(cases)
+    pos, vel = np.zeros((2 * m, 2)), np.zeros((2 * m, 2))
+    want = []
+    for p, (k, q) in enumerate(cases):
+        g, side = 2.0 ** -k, 2.0 ** -q
+        pos[2 * p + 1] = (1.0 + g, 0.0)
+        vel[2 * p + 1] = (-1.0, side)
+        # |d + dv t| = 1 with d = (1 + g, 0), dv = (-1, side): exact a, b, c, then the root.
+        a, b, c = Fraction(1) + Fraction(side) ** 2, -(1 + Fraction(g)), (1 + Fraction(g)) ** 2 - 1
+        disc = b * b - a * c
+        root = Decimal(disc.numerator).sqrt() / Decimal(disc.denominator).sqrt()
+        want.append(float(Decimal(c.numerator) / Decimal(c.denominator) / (Decimal(-b.numerator) / Decimal(b.denominator) + root)))
+    assert np.array_equal(pos.astype(dtype), pos) and np.array_equal(vel.astype(dtype), vel)
+    got = run_times(getattr(ti, real), pos, vel, np.full(2 * m, 0.5), np.zeros(2 * m), np.full(m, 1e30))
+    np.testing.assert_allclose(got, want, rtol=8 * eps, atol=0)
+
+
+@pytest.mark.parametrize("real", ["f32", "f64"])
 def test_cull_keeps_every_time_up_to_the_horizon(circles_cpu, real):
     """Pairs that meet, with horizons drawn around their times of impact: some a few units in
     the last place before or after, some far. With the horizon, a time at or before it is the
