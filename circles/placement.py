@@ -898,6 +898,14 @@ def _device(arr, width):
     return out
 
 
+class GrowthStalled(ValueError):
+    """Monte Carlo could not grow `short` of `n` circles to their radii (`hard_disk_monte_carlo`)."""
+
+    def __init__(self, short, n):
+        super().__init__(f"could not grow {short} of {n} circles to their radii: too close to jamming")
+        self.short, self.n = short, n
+
+
 def hard_disk_monte_carlo(pos, radius, target: np.ndarray, box, periodic: bool, rng: np.random.Generator,
                           sweeps: int, delta: float, single: bool = False):
     """(positions, sweeps run): `sweeps` sweeps of hard-disk Monte Carlo from a valid start.
@@ -910,9 +918,9 @@ def hard_disk_monte_carlo(pos, radius, target: np.ndarray, box, periodic: bool, 
     target radii they grow after every sweep (`_mc_grow`); the `sweeps` count starts when all
     have their radii. `delta` is adapted after each sweep towards an acceptance of
     MC_ACCEPTANCE (from the count of kept moves, an integer, so the same for any thread count).
-    Positions that leave are float32 values with `single`. Raises ValueError when the circles
-    do not grow back within MC_GROW_SWEEPS sweeps, or MC_GROW_PATIENCE sweeps go by without
-    fewer of them short.
+    Positions that leave are float32 values with `single`. Raises GrowthStalled (a ValueError)
+    when the circles do not grow back within MC_GROW_SWEEPS sweeps, or MC_GROW_PATIENCE sweeps
+    go by without fewer of them short.
     """
     n = target.shape[0]
     side = 2.0 * float(target.max()) * (1.0 + 4 * CLEARANCE)
@@ -931,9 +939,7 @@ def hard_disk_monte_carlo(pos, radius, target: np.ndarray, box, periodic: bool, 
     fewest = n + 1
     while growing or done < sweeps:
         if growing and (sweep >= MC_GROW_SWEEPS or since >= MC_GROW_PATIENCE):
-            raise ValueError(f"could not grow {short} of {n} circles to their radii in a {box[0]} x {box[1]} box: "
-                             "the area fraction is too close to jamming for these radii; "
-                             "use fewer or smaller circles or a bigger box")
+            raise GrowthStalled(short, n)
         cells.build(p, rng.uniform(0.0, cells.cw), rng.uniform(0.0, cells.ch))
         accepted = _mc_sweep(p, rad, *cells.lists(), *cells.frame(), box[0], box[1], seed, sweep, delta, periodic,
                              single)
@@ -1026,10 +1032,41 @@ def place(radius: np.ndarray, box, periodic: bool, seed: int, rng: np.random.Gen
     """
     fraction = float(np.sum(np.pi * radius ** 2)) / (box[0] * box[1])
     pos = None
-    if fraction <= RSA_LIMIT:
-        pos = random_sequential(radius, box, periodic, seed, single=single)
-    if pos is None and (fraction <= FILL_LIMIT or not lattice_fits(radius, box, periodic, single)):
-        pos = fluid(radius, box, periodic, rng, single)
-    if pos is None:
-        pos = lattice_monte_carlo(radius, box, periodic, rng, single)
+    try:
+        if fraction <= RSA_LIMIT:
+            pos = random_sequential(radius, box, periodic, seed, single=single)
+        if pos is None and (fraction <= FILL_LIMIT or not lattice_fits(radius, box, periodic, single)):
+            pos = fluid(radius, box, periodic, rng, single)
+        if pos is None:
+            pos = lattice_monte_carlo(radius, box, periodic, rng, single)
+    except GrowthStalled as stalled:
+        raise ValueError(_stalled_message(stalled, radius, box, periodic, single, fraction)) from None
     return pos
+
+
+def largest_lattice_scale(radius: np.ndarray, box, periodic: bool, single: bool = False, lowest: float = 0.3):
+    """The largest s in [lowest, 1] (to 1e-6) for which a hexagonal lattice of the largest radius
+    times s holds the circles times s (`lattice_fits`), or None below `lowest`."""
+    if not lattice_fits(radius * lowest, box, periodic, single):
+        return None
+    lo, hi = lowest, 1.0
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lattice_fits(radius * mid, box, periodic, single) else (lo, mid)
+    return lo
+
+
+def _stalled_message(stalled, radius, box, periodic, single, fraction):
+    """Why a placement stopped, with the area fraction and, when a lattice holds the circles at
+    smaller radii, the area fraction it places them at."""
+    w, h = box
+    said = (f"cannot place {stalled.n} circles at area fraction {fraction:.4f} in a {w} x {h} box with "
+            f"{'a periodic boundary' if periodic else 'walls'}: Monte Carlo could not grow {stalled.short} of "
+            "them to their radii from a start at smaller radii (too close to jamming for these radii)")
+    scale = largest_lattice_scale(radius, box, periodic, single)
+    if scale is None:
+        return said + "; use fewer or smaller circles, a narrower spread of radii, or a bigger box"
+    reach = fraction * scale * scale
+    return (said + f"; a hexagonal lattice of the largest radius holds them with every radius {scale:.6f} times "
+            f"its own (area fraction {reach:.4f}), which places: use radii at most that many times these, fewer "
+            "circles or a bigger box")

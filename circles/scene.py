@@ -123,7 +123,7 @@ PLACE_CLEARANCE = 1e-6
 def rounding_margin(box, single: bool) -> float:
     """A bound on how far rounding a position to the storage precision (and wrapping it) moves it."""
     eps = 2.0 ** -24 if single else 2.0 ** -53
-    return 4.0 * max(box) * eps
+    return max(box) * (4.0 * eps)  # in this order, finite for any finite box
 
 
 def check_room(rmax, box, boundary, precision):
@@ -133,6 +133,11 @@ def check_room(rmax, box, boundary, precision):
     w, h = box
     rounding = rounding_margin(box, precision == "f32")
     if boundary == "walls" and 2 * rmax * (1 + 2 * PLACE_CLEARANCE) + 2 * rounding > min(w, h):
+        if 2 * rounding >= min(w, h):
+            raise ValueError(f"the box {w} x {h} is too thin to place circles at random in {precision}: rounding a "
+                             f"place to {precision} at this box's size moves it by up to {rounding:.3g}, and twice "
+                             f"that leaves no room across the side {min(w, h)}: use a box whose sides differ less"
+                             + (", or precision 'f64'" if precision == "f32" else ""))
         most = (min(w, h) - 2 * rounding) / (2 * (1 + 2 * PLACE_CLEARANCE))
         most = float(f"{most * (1 - 1e-8):.9g}")  # printed below the limit, not rounded above it
         raise ValueError(f"radius {rmax} leaves no room to place the circle at random in the box {w} x {h} (its "

@@ -154,10 +154,11 @@ def circle_list_from_dict(data: dict) -> CircleList:
             color[i] = _color(name, entry["color"])
             has_color[i] = True
 
-    _check_inside(pos, radius, box, boundary)
+    from .simulation import masses_for, place_slack, random_colors
+
+    _check_inside(pos, radius, box, boundary, place_slack(precision, box))
     _check_no_overlap(pos, radius, box, boundary)
 
-    from .simulation import masses_for, random_colors
     default_mass = masses_for(model, radius)
     mass = np.where(np.isnan(mass), default_mass, mass)
     if not has_color.any():
@@ -204,7 +205,9 @@ def _color(name, value):
     return value
 
 
-def _check_inside(pos, radius, box, boundary):
+def _check_inside(pos, radius, box, boundary, slack):
+    """Every circle inside the walls, or across one by at most `slack` (the rounding of a place,
+    as `Simulation.from_arrays` allows)."""
     w, h = box
     if boundary == "periodic":
         # Positions wrap around the torus; a circle must not meet two images of one neighbour.
@@ -216,8 +219,8 @@ def _check_inside(pos, radius, box, boundary):
                              f"periodic box {w} x {h}: each side must exceed two diameters "
                              f"({4.0 * r:.6g}); use a smaller circle or a bigger box")
         return
-    outside = ((pos[:, 0] < radius) | (pos[:, 0] > w - radius)
-               | (pos[:, 1] < radius) | (pos[:, 1] > h - radius))
+    lo = radius - slack
+    outside = ((pos[:, 0] < lo) | (pos[:, 0] > w - lo) | (pos[:, 1] < lo) | (pos[:, 1] > h - lo))
     if outside.any():
         i = int(np.flatnonzero(outside)[0])
         r = float(radius[i])

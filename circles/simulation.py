@@ -138,7 +138,7 @@ def _masses(model, radius):
         if model == "area":
             return np.pi * radius * radius
         return np.ones_like(radius)
-    mass = np.asarray(model, dtype=np.float64)
+    mass = real_numbers("mass", model)
     if mass.shape != radius.shape:
         raise ValueError(f"mass has shape {mass.shape}, expected ({radius.shape[0]},): one mass per circle")
     if not np.all(np.isfinite(mass)) or np.any(mass <= 0):
@@ -193,13 +193,28 @@ def check_colors(color, n):
     return c.astype(np.uint8)
 
 
+def real_numbers(name, value):
+    """`value` as a float64 array, when it holds real numbers (integers or floats); ValueError
+    for booleans, complex numbers, strings or objects, which numpy would convert silently (or,
+    for complex, drop a part of)."""
+    try:
+        arr = np.asarray(value)
+    except ValueError as error:  # ragged nested lists
+        raise ValueError(f"{name} is not an array of numbers ({error}): give a list or array of real "
+                         "numbers") from None
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} holds values of type {arr.dtype}, not real numbers: give integers or floats")
+    return arr.astype(np.float64)
+
+
 def check_circles(pos, vel, radius, precision):
     """Given circles (`Simulation.from_arrays`, `Simulation.load`): pos and vel (n, 2) and
     finite, no speed above MAX_SPEED[precision], for n radii that are finite and > 0."""
     n = radius.shape[0]
     for name, arr in (("pos", pos), ("vel", vel)):
         if arr.shape != (n, 2):
-            raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2) for {n} radii")
+            raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 2): one (x, y) row per circle, as "
+                             f"many as the {n} radii")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{name} holds a non-finite value {arr[~np.isfinite(arr)][0]}")
     speeds = np.hypot(vel[:, 0], vel[:, 1])
@@ -223,8 +238,10 @@ def check_placed(pos, radius, box, boundary, slack):
         if np.any(out):
             i = int(np.flatnonzero(out)[0])
             at = tuple(float(x) for x in pos[i])
-            raise ValueError(f"circle {i} at {at} with radius {radius[i]} is not inside the walls "
-                             f"[0, {w}] x [0, {h}]: move it inside")
+            r = float(radius[i])
+            raise ValueError(f"circle {i} at {at} with radius {r} is not inside the walls "
+                             f"[0, {w}] x [0, {h}]: move it inside, its centre to x in [{r}, {w - r}] and y in "
+                             f"[{r}, {h - r}] (to within {slack:.3g})")
 
 
 def place_slack(precision, box):
@@ -564,7 +581,8 @@ class Simulation:
     @classmethod
     def from_arrays(cls, pos, vel, radius, mass=None, box=(1.0, 1.0), boundary="walls", scheme="event",
                     precision="f64", dt=None, *, color=None, record_events: int = 0) -> "Simulation":
-        """A simulation of given circles. mass: None (proportional to radius), a model name or (n,) masses."""
+        """A simulation of given circles: pos and vel (n, 2), radius (n,) or one radius for all. mass:
+        None (proportional to radius), a model name or (n,) masses."""
         ensure_init()
         box = check_box(box)
         _choice("boundary", boundary, BOUNDARIES)
@@ -572,16 +590,21 @@ class Simulation:
         _choice("precision", precision, PRECISIONS)
         check_record_events(record_events, scheme)
         dt = check_dt(dt)
-        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
+        pos = real_numbers("pos", pos)
+        vel = real_numbers("vel", vel)
+        radius = real_numbers("radius", radius)
+        if radius.ndim == 0:  # one radius for every circle
+            radius = np.full(pos.shape[0] if pos.ndim == 2 else 1, float(radius))
+        radius = radius.reshape(-1)
         n = radius.shape[0]
         if n == 0:
             raise ValueError("n = 0 circles: give at least one")
         check_memory(n, scheme, precision, record_events=record_events)
-        pos = np.asarray(pos, dtype=np.float64)
-        vel = np.asarray(vel, dtype=np.float64)
         check_circles(pos, vel, radius, precision)
         mass = masses_for("radius" if mass is None else mass, radius, precision)
-        check_placed(pos, radius, box, boundary, 0.0)
+        # A place given as the result of arithmetic (0.3 - 0.2 for a radius of 0.1) may cross a
+        # wall by its rounding, as a saved one may (`load`).
+        check_placed(pos, radius, box, boundary, place_slack(precision, box))
         if boundary == "periodic":
             pos = pos % np.array(box)
         color = random_colors(n, np.random.default_rng(0)) if color is None else check_colors(color, n)

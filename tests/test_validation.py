@@ -247,3 +247,82 @@ def test_masses_of_any_size_within_the_ratio_the_precision_carries(circles_cpu):
     refused(from_arrays(circles_cpu, mass=np.array([1e-200, 1.0, 1e200, 1.0])), r"1e\+400|inf", r"1e\+300")
     refused(from_arrays(circles_cpu, radius=np.array([0.05, 1e-20, 0.05, 0.05]), mass="area", precision="f32"),
             "times as heavy as circle 1", r"1e\+36")
+
+
+def test_from_arrays_takes_real_numbers_only(circles_cpu):
+    """numpy would turn complex places into real ones (dropping the imaginary part), strings
+    into numbers and booleans into 0 and 1: each is refused, naming the array and its type."""
+    p, v, r = arrays()
+    refused(from_arrays(circles_cpu, pos=p + 1j), "pos", "complex")
+    refused(from_arrays(circles_cpu, vel=v.astype(str)), "vel", "<U")
+    refused(from_arrays(circles_cpu, radius=r.astype(str)), "radius", "<U")
+    refused(from_arrays(circles_cpu, mass=np.ones(4, bool)), "mass", "bool")
+    refused(from_arrays(circles_cpu, pos=[[0.2, 0.2], [0.6]] * 2), "pos", "numbers")
+    whole = circles_cpu.Simulation.from_arrays(np.array([[1, 1], [3, 1]]), [[1, 0], [0, 0]], [1, 1], box=(5, 3))
+    assert whole.state().pos.tolist() == [[1.0, 1.0], [3.0, 1.0]]  # integers are numbers
+
+
+def test_from_arrays_one_radius_for_every_circle(circles_cpu):
+    """A single radius, as Scene takes it, is every circle's: the same simulation as with the
+    array of it."""
+    p, v, r = arrays()
+    one, each = (circles_cpu.Simulation.from_arrays(p, v, radius, box=(1.0, 1.0)) for radius in (0.05, r))
+    for sim in (one, each):
+        sim.advance(1.0)
+    assert np.array_equal(one.state().pos, each.state().pos)
+    assert one.stats()["pair_collisions"] == each.stats()["pair_collisions"]
+    refused(from_arrays(circles_cpu, radius=r[:3]), r"\(4, 2\)", r"\(3, 2\).*3 radii")
+
+
+def test_from_arrays_a_wall_contact_by_round_off_is_inside(circles_cpu):
+    """0.3 - 0.2 is 0.09999999999999998: a circle of radius 0.1 placed there touches the wall x = 0
+    up to the rounding of the place, and is taken, as from a scene file (within the precision's
+    `place_slack`). A circle across a wall by more is refused with the range its centre takes."""
+    x = 0.3 - 0.2
+    assert x < 0.1
+    for precision in ("f64", "f32"):
+        sim = circles_cpu.Simulation.from_arrays([[x, 0.5]], [[-1.0, 0.0]], [0.1], box=(1.0, 1.0),
+                                                 precision=precision)
+        sim.advance(1.0)
+        assert sim.stats()["wall_collisions"] == 2 and sim.state().vel[0, 0] == -1.0
+    refused(lambda: circles_cpu.Simulation.from_arrays([[0.099, 0.5]], [[0.0, 0.0]], [0.1], box=(1.0, 1.0)),
+            r"circle 0 at \(0\.099, 0\.5\)", r"x in \[0\.1, 0\.9\]")
+    from circles import scenefile
+
+    circle = {"pos": [x, 0.5], "vel": [1.0, 0.0], "radius": 0.1}
+    listed = scenefile.circle_list_from_dict({"box": [1.0, 1.0], "circle": [circle]})
+    assert listed.pos[0, 0] == x
+
+
+@pytest.mark.parametrize("box, precision", [((1e12, 1e-4), "f32"), ((1e-320, 3.0), "f64")])
+def test_a_box_too_thin_for_the_precision_is_refused_as_such(circles_cpu, box, precision):
+    """A box whose long side rounds a place by more than its short side leaves no radius that
+    places: it is refused as too thin (with a fix), not with a negative largest radius."""
+    message = refused(scene(circles_cpu, n=5, box=box, radius=1e-5 if precision == "f32" else 1e-322,
+                            precision=precision), "too thin", precision)
+    assert "at most -" not in message
+
+
+def test_a_huge_box_leaves_room_for_its_circles(circles_cpu):
+    """A box near the largest float: the rounding margin (4 units in the last place of its side)
+    stays finite, so a scene that fits is not refused."""
+    from circles.scene import check_room, rounding_margin
+
+    assert math.isfinite(rounding_margin((1e308, 1e308), False))
+    check_room(1e300, (1e308, 1e308), "walls", "f64")  # no error
+
+
+def test_a_scene_too_close_to_jamming_names_the_fraction_that_places(circles_cpu):
+    """2000 equal circles at area fraction 0.88 in a walled 16 x 9 box: below the densest packing,
+    but no lattice of them fits, and Monte Carlo cannot grow them back from smaller radii. The
+    error names the fraction and the radii (a scale of these) at which a lattice holds them,
+    and those place."""
+    n, box = 2000, (16.0, 9.0)
+    r = math.sqrt(0.88 * box[0] * box[1] / (n * math.pi))
+    message = refused(lambda: circles_cpu.Simulation(circles_cpu.Scene(n=n, box=box, radius=r, scheme="discrete")),
+                      r"area fraction 0\.8800", "jamming")
+    scale = float(re.search(r"every radius ([\d.]+) times", message).group(1))
+    fraction = float(re.search(r"area fraction (0\.\d+)\), which places", message).group(1))
+    assert 0.99 < scale < 1.0 and fraction == pytest.approx(0.88 * scale ** 2, abs=1e-4)
+    placed = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=box, radius=r * scale, scheme="discrete"))
+    assert placed.stats()["max_overlap"] == 0
