@@ -35,6 +35,13 @@ GIF_MAX_FPS = 50
 # least 100/65535 (about 0.0015) frames per second.
 GIF_MAX_DELAY = 65535
 GIF_MIN_FPS = 100 / GIF_MAX_DELAY
+#: A GIF frame that the first frame's palette renders with more than GIF_LOCAL_SHARE of its
+#: pixels off by more than GIF_LOCAL_LEVELS (of 255) in a channel, and with more than twice the
+#: share of the first frame itself (which may hold more colours than a palette), gets a palette
+#: of its own: colours that the first frame lacked (circles coloured by speed, whose speeds
+#: spread). A frame with the colours of the first keeps its palette, so that they do not flicker.
+GIF_LOCAL_LEVELS = 24
+GIF_LOCAL_SHARE = 1e-3
 # MP4 frame rates (ffmpeg 7 of imageio-ffmpeg, libx264, the mp4 muxer; measured). ffmpeg reads
 # a rate as a fraction of whole numbers up to 1001000 (av_parse_video_rate): a higher rate
 # is silently taken as 1001000 frames per second, one below 1/2002000 as 0, which it
@@ -370,7 +377,8 @@ class _GifSink:
 
     The 256-colour palette is taken from the first frame and kept, so colours do not
     flicker from frame to frame; pixels map to their nearest palette colour, undithered
-    (dithering would add noise that moves every frame).
+    (dithering would add noise that moves every frame). A frame that palette cannot show
+    (colours the first frame lacked, see GIF_LOCAL_LEVELS) carries a palette of its own.
 
     When a write fails, or stops midway (Ctrl-C), the file is cut back to the end of the last
     whole frame and ended there, so that the frames before stay readable."""
@@ -382,6 +390,7 @@ class _GifSink:
         self._palette_image = None
         self._index = 0
         self._end = 0  # bytes of the header and the whole frames
+        self._first_off = 0.0  # share of the first frame's pixels its palette shows off
 
     def _delay(self, index):
         # Hundredths of a second; rounding the frame's end time keeps the total exact.
@@ -414,9 +423,21 @@ class _GifSink:
         if self._file is None:
             self._open(image)
         indexed = image.quantize(palette=self._palette_image, dither=Image.Dither.NONE)
+        shown = np.asarray(indexed.convert("RGB"), dtype=np.int16)
+        off = float(np.mean(np.abs(shown - frame).max(axis=2) > GIF_LOCAL_LEVELS))
+        if self._index == 0:
+            self._first_off = off
+        local = off > GIF_LOCAL_SHARE and off > 2.0 * self._first_off
+        if local:
+            indexed = image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        image_data = b"".join(GifImagePlugin.getdata(indexed))
+        if local:
+            # The image descriptor (10 bytes) flags a local table of 256 colours, which follows it.
+            table = bytes(indexed.getpalette()[:768]).ljust(768, b"\0")
+            image_data = image_data[:9] + bytes([0x87]) + table + image_data[10:]
         # Graphic control extension: keep the frame (disposal 1), then wait the delay.
         data = b"".join([b"!\xf9\x04\x04" + self._delay(self._index).to_bytes(2, "little")
-                         + b"\x00\x00", *GifImagePlugin.getdata(indexed)])
+                         + b"\x00\x00", image_data])
         try:
             self._file.write(data)
             self._file.flush()

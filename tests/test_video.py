@@ -229,6 +229,21 @@ def test_gif_loops_and_keeps_the_frame_rate(tmp_path):
     assert meta["duration"] == pytest.approx(40)  # milliseconds
 
 
+def test_gif_frames_with_colours_the_first_lacked_keep_them(tmp_path):
+    """The GIF's palette comes from the first frame; circles coloured by speed change colour as
+    the speeds spread, so a later frame can hold colours the first lacked. Such a frame carries
+    a palette of its own: each frame reads back as written (a few colours, so exactly)."""
+    written = frames(4)
+    for k, colour in enumerate([(230, 40, 40), (40, 200, 90), (60, 80, 250), (250, 220, 30)]):
+        written[k][20:36, 8 + 8 * k:24 + 8 * k] = colour
+        written[k][40:50, 10:90] = (k * 60, 255 - k * 60, 128)
+    path = tmp_path / "speeds.gif"
+    with FrameWriter(path, FPS) as writer:
+        for frame in written:
+            writer.write(frame)
+    assert (read_back(path) == np.stack(written)).all()
+
+
 def test_gif_is_written_while_frames_come(tmp_path):
     # Streaming: each frame reaches the file before the next, nothing is held back.
     path = tmp_path / "stream.gif"
