@@ -20,8 +20,10 @@ area in pixels, pi r^2, at every size:
   the circle sits, so a moving dot does not twinkle; at this size the shape hardly shows,
   its brightness and position do. A square under one pixel wide is widened to one pixel
   at lower density, which shares a point's weight bilinearly among the four nearest
-  pixels: a sub-pixel circle is a faint dot, never lost, and a million of them show
-  their density.
+  pixels: a sub-pixel circle is a faint dot of its own area's weight, never dropped, and
+  a million of them show their density; one alone shows where its weight times its contrast
+  with the background reaches half a level of 255 (white on black: a radius of about 0.05
+  pixel, spread over four pixels).
 
 Blending is order independent: every pixel accumulates ``sum(coverage)`` and
 ``sum(coverage * colour)`` in 32-bit fixed point (integer sums are exact, so the image is
@@ -120,10 +122,13 @@ def _reach(r: ti.f32) -> ti.f32:
 @ti.func
 def _pixel_range(cx: ti.f32, cy: ti.f32, reach: ti.f32, clip: ti.math.ivec4) -> ti.math.ivec4:
     """Pixels [x_lo, x_hi) x [y_lo, y_hi) a circle may cover, within ``clip``."""
-    return ti.math.ivec4(ti.max(ti.floor(cx - reach, ti.i32), clip[0]),
-                         ti.min(ti.floor(cx + reach, ti.i32) + 1, clip[1]),
-                         ti.max(ti.floor(cy - reach, ti.i32), clip[2]),
-                         ti.min(ti.floor(cy + reach, ti.i32) + 1, clip[3]))
+    # Clamped as floats first: a circle far larger than the image would overflow an i32.
+    lo = ti.cast(clip, ti.f32) - 1.0
+    hi = ti.cast(clip, ti.f32) + 1.0
+    return ti.math.ivec4(ti.max(ti.floor(ti.max(cx - reach, lo[0]), ti.i32), clip[0]),
+                         ti.min(ti.floor(ti.min(cx + reach, hi[1]), ti.i32) + 1, clip[1]),
+                         ti.max(ti.floor(ti.max(cy - reach, lo[2]), ti.i32), clip[2]),
+                         ti.min(ti.floor(ti.min(cy + reach, hi[3]), ti.i32) + 1, clip[3]))
 
 
 @ti.func
@@ -170,16 +175,17 @@ def _chunk_begin(c: ti.i32, n: ti.i32, chunks: ti.i32) -> ti.i32:
 
 @ti.func
 def _packed_colour(i: ti.i32, vel: ti.template(), color: ti.template(), colormap: ti.template(),
-                   speed_mode: ti.template(), inv_speed_scale: ti.f32) -> ti.f32:
+                   speed_mode: ti.template(), inv_speed_scale: ti.f64) -> ti.f32:
     """Circle ``i``'s colour, its three bytes packed into the bits of an f32 (an entry's
     fourth number)."""
     rgb = ti.math.ivec3(0)
     if ti.static(speed_mode):
-        vx = ti.cast(vel[i, 0], ti.f32)
-        vy = ti.cast(vel[i, 1], ti.f32)
+        # Scaled in the velocities' own precision before float32 (which the square of a speed
+        # above 1e19 or below 1e-19 would leave), so the colours do not depend on the units.
+        vx = ti.cast(vel[i, 0] * inv_speed_scale, ti.f32)
+        vy = ti.cast(vel[i, 1] * inv_speed_scale, ti.f32)
         n_colors = colormap.shape[0]
-        u = ti.math.clamp(ti.sqrt(vx * vx + vy * vy) * inv_speed_scale, 0.0, 1.0) \
-            * (n_colors - 1)
+        u = ti.math.clamp(ti.sqrt(vx * vx + vy * vy), 0.0, 1.0) * (n_colors - 1)
         k = ti.min(ti.cast(u, ti.i32), n_colors - 2)
         f = u - k
         for c in ti.static(range(3)):
@@ -257,7 +263,7 @@ def _bin_circles(
     tile_cursor: ti.types.ndarray(ndim=1),
     entries: ti.types.ndarray(dtype=ti.math.vec4, ndim=1),
     speed_mode: ti.template(),
-    inv_speed_scale: ti.f32,
+    inv_speed_scale: ti.f64,
     view: ti.math.vec4,
     box: ti.math.vec2,
     clip: ti.math.ivec4,
@@ -382,7 +388,7 @@ def _bin_chunk_circles(
     workers: ti.i32,
     entries: ti.types.ndarray(dtype=ti.math.vec4, ndim=1),
     speed_mode: ti.template(),
-    inv_speed_scale: ti.f32,
+    inv_speed_scale: ti.f64,
     view: ti.math.vec4,
     box: ti.math.vec2,
     clip: ti.math.ivec4,
@@ -746,8 +752,11 @@ def speed_scale_of(vel):
     vel = np.asarray(vel, dtype=np.float64)
     if len(vel) == 0:
         return 1.0
-    rms = math.sqrt(float(np.einsum("ij,ij->", vel, vel)) / len(vel))
-    return SPEED_RMS_MULTIPLE * rms if rms > 0.0 and math.isfinite(rms) else 1.0
+    largest = float(np.max(np.abs(vel)))
+    if not (largest > 0.0 and math.isfinite(largest)):
+        return 1.0
+    unit = vel / largest  # so that no square overflows or underflows, whatever the units
+    return SPEED_RMS_MULTIPLE * largest * math.sqrt(float(np.einsum("ij,ij->", unit, unit)) / len(vel))
 
 
 def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="random",
@@ -781,10 +790,21 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
     n = radius.shape[0]
     pos = _float_array("pos", pos, (2,), n)
     vel = _float_array("vel", vel, (2,), n)
-    color = np.asarray(color)
-    if color.shape != (n, 3):
-        raise ValueError(f"color has shape {color.shape}, expected (n, 3) with n = {n}")
-    color = np.ascontiguousarray(color, dtype=np.uint8)
+    for name, values in (("radius", radius), ("pos", pos), ("vel", vel)):
+        bad = ~np.isfinite(values) | ((values <= 0) if name == "radius" else False)
+        if bad.any():
+            i = int(np.flatnonzero(bad.reshape(n, -1).any(axis=1))[0])
+            raise ValueError(f"circle {i}'s {name} {values[i].tolist()} must be finite"
+                             + (" and > 0" if name == "radius" else ""))
+    from .simulation import check_colors
+
+    color = check_colors(color, n)
+    # World lengths in units of a power of two near the box's side (an exact scaling), so that
+    # a box of any size draws in the float32 of the kernels.
+    exponent = math.frexp(max(box_w, box_h))[1]
+    if abs(exponent) > 60:
+        pos, radius = np.ldexp(pos.astype(np.float64), -exponent), np.ldexp(radius.astype(np.float64), -exponent)
+        box_w, box_h = math.ldexp(box_w, -exponent), math.ldexp(box_h, -exponent)
     background = np.asarray(background, dtype=np.float32)
     if background.shape != (3,) or not ((background >= 0) & (background <= 255)).all():
         raise ValueError(f"background {background.tolist()} must be an RGB triple of 0 to 255")
@@ -826,7 +846,7 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
         raise ValueError(f"{entries} circle-tile overlaps exceed {_MAX_ENTRIES}: the "
                          "circles are too large for this image size")
     buffers.reserve_entries(entries)
-    inv_speed_scale = 1.0 / speed_scale
+    inv_speed_scale = min(1.0 / speed_scale, 1e300)  # finite, so that a circle at rest maps to 0
     if buffers.chunks:
         _bin_chunk_circles(flat_pos, vel, radius, color, VIRIDIS, buffers.chunk_count,
                            buffers.chunks, buffers.rank, buffers.queue, buffers.workers,

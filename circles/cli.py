@@ -12,7 +12,8 @@ still override the file, and --n, --radius, --speed and --seed are refused.
 
 Frames are taken every 1/fps of simulated time, starting with the state at t = 0, so a run
 of ``duration`` seconds gives ``ceil(duration * fps)`` frames showing t = 0, 1/fps, ...,
-and the video lasts ``duration`` seconds and shows the same motion on every machine. The
+each shown for 1/fps, so the video lasts ``duration`` seconds (up to the next whole frame,
+``ceil(duration * fps) / fps``) and shows the same motion on every machine. The
 simulation runs the whole ``duration``; the state at the end is summarised, not drawn. A run
 makes at most MOST_FRAMES frames (refused before any work beyond that).
 
@@ -198,9 +199,9 @@ def _parse_size(size):
     from .canvas import MAX_IMAGE_SIDE
     for value in (width, height):
         if isinstance(value, bool) or not isinstance(value, int) \
-                or not 2 <= value <= MAX_IMAGE_SIDE:
+                or not 1 <= value <= MAX_IMAGE_SIDE:
             raise UsageError(f"size {size!r}: width and height must be whole numbers of "
-                             f"pixels from 2 to {MAX_IMAGE_SIDE}")
+                             f"pixels from 1 to {MAX_IMAGE_SIDE}")
     return width, height
 
 

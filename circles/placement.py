@@ -62,7 +62,7 @@ import taichi as ti
 
 from .geometry import cell_index, displacement, neighbour_range
 from .grid import Grid, prefix_sum
-from .scene import DENSEST_PACKING, PLACE_CLEARANCE, rounding_margin
+from .scene import DENSEST_PACKING, PLACE_CLEARANCE, area_fraction, rounding_margin
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -302,7 +302,7 @@ def hexagonal(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator,
     uw, uh = (w, h) if periodic else (w - 2 * edge, h - 2 * edge)
     nx, ny, ax, ay, spacing = _lattice_shape(n, uw, uh, periodic)
     if spacing < need and not fill:
-        fraction = float(np.sum(np.pi * radius ** 2)) / (w * h)
+        fraction = area_fraction(radius, box)
         raise ValueError(f"cannot place {n} circles of radius up to {rmax} in a {w} x {h} box "
                          f"(area fraction {fraction:.4f}): the best lattice leaves {spacing:.6g} between centres, "
                          f"below the largest diameter {2 * rmax:.6g} plus a clearance of {need - 2 * rmax:.3g}"
@@ -371,7 +371,7 @@ def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Gen
         except ValueError:
             if scale < 0.3:
                 w, h = box
-                fraction = float(np.sum(np.pi * radius ** 2)) / (w * h)
+                fraction = area_fraction(radius, box)
                 raise ValueError(f"cannot place {radius.shape[0]} circles of radius up to {float(radius.max())} in a "
                                  f"{w} x {h} box (area fraction {fraction:.4f}): no lattice of the largest radius "
                                  "holds them, even with every radius shrunk to 0.3 of its own to start; use "
@@ -994,7 +994,7 @@ def fluid(radius: np.ndarray, box, periodic: bool, rng: np.random.Generator, sin
 
 def _mean_gap(radius, box):
     """The mean gap between neighbours of a hexagonal lattice at this area fraction: a first trial step."""
-    fraction = float(np.sum(np.pi * radius ** 2)) / (box[0] * box[1])
+    fraction = area_fraction(radius, box)
     mean_r = float(radius.mean())
     gap = 2.0 * mean_r * (math.sqrt(DENSEST_PACKING / fraction) - 1.0)
     return max(gap, 1e-3 * mean_r)
@@ -1012,7 +1012,7 @@ def lattice_fits(radius: np.ndarray, box, periodic: bool, single: bool = False) 
 
 def method(radius: np.ndarray, box, periodic: bool = False, single: bool = False) -> str:
     """The method `place` tries first for these circles."""
-    fraction = float(np.sum(np.pi * radius ** 2)) / (box[0] * box[1])
+    fraction = area_fraction(radius, box)
     if fraction <= RSA_LIMIT:
         return "random sequential addition"
     if fraction <= FILL_LIMIT or not lattice_fits(radius, box, periodic, single):
@@ -1030,7 +1030,7 @@ def place(radius: np.ndarray, box, periodic: bool, seed: int, rng: np.random.Gen
     lattice. `seed` keys random sequential addition; the other methods draw from `rng`.
     Raises ValueError when the circles cannot be placed.
     """
-    fraction = float(np.sum(np.pi * radius ** 2)) / (box[0] * box[1])
+    fraction = area_fraction(radius, box)
     pos = None
     try:
         if fraction <= RSA_LIMIT:

@@ -10,6 +10,8 @@ import tomllib
 from dataclasses import dataclass, fields, asdict
 from numbers import Integral, Real
 
+import numpy as np
+
 MASS_MODELS = ("radius", "area", "equal")
 BOUNDARIES = ("walls", "periodic")
 SCHEMES = ("event", "discrete")
@@ -146,6 +148,13 @@ def check_room(rmax, box, boundary, precision):
                          "yourself with Simulation.from_arrays")
 
 
+def area_fraction(radius, box) -> float:
+    """The circles' area over the box's, as pi sum (r / W)(r / H): no square of a length, so
+    neither underflow nor overflow for any finite box and radii."""
+    r = np.asarray(radius, dtype=np.float64)
+    return float(np.pi * np.sum((r / box[0]) * (r / box[1])))
+
+
 def check_area_fraction(fraction, n, box):
     if fraction > DENSEST_PACKING:
         digits = 4  # as many as show the two apart
@@ -205,8 +214,9 @@ class Scene:
 
     @staticmethod
     def expected_area_fraction_of(n, box, rlo, rhi):
-        mean_r2 = (rlo * rlo + rlo * rhi + rhi * rhi) / 3.0  # E[r^2] for r uniform in [rlo, rhi]
-        return n * math.pi * mean_r2 / (box[0] * box[1])
+        # E[r^2] / (W H) for r uniform in [rlo, rhi], in lengths over the box's sides (see area_fraction)
+        (aw, ah), (bw, bh) = (rlo / box[0], rlo / box[1]), (rhi / box[0], rhi / box[1])
+        return n * math.pi * (aw * ah + 0.5 * (aw * bh + bw * ah) + bw * bh) / 3.0
 
     @property
     def area_fraction(self) -> float:

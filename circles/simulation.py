@@ -26,8 +26,8 @@ from . import discrete, event, launch, placement, reductions
 from .backend import current_arch, ensure_init, on_restart, runtime, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
-from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_area_fraction,
-                    check_box, check_count, check_dt, check_fits, check_speed)
+from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, area_fraction,
+                    check_area_fraction, check_box, check_count, check_dt, check_fits, check_speed)
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
 #: cells, and the clusters a split into parts must keep whole, grow with it; a step cut short
@@ -231,7 +231,7 @@ def check_placed(pos, radius, box, boundary, slack):
     n = radius.shape[0]
     check_fits(float(radius.max()), box, boundary)
     w, h = box
-    check_area_fraction(float(np.sum(np.pi * radius ** 2)) / (w * h), n, box)
+    check_area_fraction(area_fraction(radius, box), n, box)
     if boundary == "walls":
         lo, hi = radius - slack, np.array(box) - radius[:, None] + slack
         out = np.any((pos < lo[:, None]) | (pos > hi), axis=1)
@@ -570,7 +570,7 @@ class Simulation:
         vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
         color = random_colors(n, rng)
         mass = masses_for(scene.mass, radius, scene.precision)
-        fraction = float(np.sum(np.pi * radius ** 2)) / (scene.box[0] * scene.box[1])
+        fraction = area_fraction(radius, scene.box)
         check_area_fraction(fraction, n, scene.box)
         periodic = scene.boundary == "periodic"
         pos = placement.place(radius, scene.box, periodic, scene.seed, rng, single=scene.precision == "f32")

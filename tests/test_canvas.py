@@ -165,6 +165,51 @@ def test_bad_arguments_are_refused_with_the_allowed_values(canvas, options, word
         assert word in str(error.value)
 
 
+@pytest.mark.parametrize("arrays, words", [
+    ({"radius": [-1.0]}, ["circle 0", "radius", "-1.0", "> 0"]),
+    ({"radius": [np.nan]}, ["circle 0", "radius", "nan"]),
+    ({"pos": [[np.inf, 4.0]]}, ["circle 0", "pos", "inf", "finite"]),
+    ({"color": [[300, 0, 0]]}, ["circle 0", "300", "0 to 255"]),
+    ({"color": [[0.9, 0.0, 0.0]]}, ["circle 0", "0.9", "multiply by 255"]),
+])
+def test_bad_circles_are_refused_naming_the_circle(canvas, arrays, words):
+    """Radii, places and colours the drawing cannot mean (a negative or NaN radius drew a dot or
+    nothing, a colour of 300 wrapped to 44, a fraction turned black) are refused."""
+    given = {"pos": [[8.0, 4.0]], "radius": [1.0], "color": [[255, 0, 0]], **arrays}
+    with pytest.raises(ValueError) as error:
+        canvas.render(np.array(given["pos"]), np.zeros((1, 2)), np.array(given["radius"]),
+                      np.array(given["color"]), BOX, 64, 36)
+    for word in words:
+        assert word in str(error.value)
+
+
+def test_a_circle_far_larger_than_the_image_covers_the_box(canvas):
+    """A radius of 1e9 box widths: its pixel range is clamped before it becomes an integer (it
+    overflowed one and drew nothing)."""
+    image = draw(canvas, [[8.0, 4.5]], 1.6e10, color=(255, 0, 0), width=64, height=36)
+    assert (image[..., 0] == 255).all()
+
+
+@pytest.mark.parametrize("unit", [2.0 ** -200, 1e-30, 1e30, 1e300])
+def test_the_picture_does_not_depend_on_the_units(canvas, unit):
+    """Lengths and speeds in other units (a box of 1e-30 or 1e300, speeds scaled alike) draw the
+    same picture: the kernels' float32 would lose such lengths, and the squares of such speeds,
+    so lengths are drawn in units near the box's side, and speeds scaled before their square.
+    Powers of two scale exactly, so the pictures are equal to the last bit; other factors
+    round the places by an ulp, within one level of 255."""
+    rng = np.random.default_rng(3)
+    pos = rng.uniform([1.0, 1.0], [15.0, 8.0], (200, 2))
+    radius = rng.uniform(0.1, 0.4, 200)
+    vel = rng.normal(0.0, 1.0, (200, 2))
+    colors = rng.integers(0, 256, (200, 3)).astype(np.uint8)
+    for mode in ("random", "speed"):
+        one = canvas.render(pos, vel, radius, colors, BOX, 160, 90, mode)
+        other = canvas.render(pos * unit, vel * unit, radius * unit, colors, (BOX[0] * unit, BOX[1] * unit), 160, 90,
+                              mode)
+        difference = np.abs(one.astype(int) - other.astype(int)).max()
+        assert difference <= (0 if math.log2(unit).is_integer() else 1), mode
+
+
 def test_mismatched_arrays_are_refused(canvas):
     with pytest.raises(ValueError, match="pos"):
         canvas.render(np.zeros((3, 2)), np.zeros((2, 2)), np.ones(2),

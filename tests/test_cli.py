@@ -44,6 +44,18 @@ def test_run_writes_a_gif_of_duration_times_fps_frames(tmp_path):
     assert "Starting on arch" not in summary  # ti.init's line: the summary names the arch
 
 
+def test_one_pixel_sides_make_png_frames_as_the_canvas_does(tmp_path):
+    """PNG frames (and GIFs) take any size the canvas draws, 1 pixel a side included; an MP4
+    refuses odd sides with its own message."""
+    small = [a if a != "80x60" else "1x3" for a in SMALL]
+    result = run_cli(["run", *small, "--duration", "0.2", "--fps", "10", "--out", "frames"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    pngs = sorted((tmp_path / "frames").glob("frame_*.png"))
+    assert len(pngs) == 2 and iio.imread(pngs[0]).shape == (3, 1, 3)
+    result = run_cli(["run", *small, "--duration", "0.2", "--fps", "10", "--out", "one.mp4"], tmp_path)
+    assert result.returncode == 2 and "even" in result.stderr
+
+
 def test_scene_file_with_flags_overriding_it(tmp_path):
     (tmp_path / "scene.toml").write_text(
         'n = 20\nbox = [4.0, 3.0]\nradius = 0.1\nspeed = [0.5, 1.0]\nmass = "equal"\n'

@@ -326,3 +326,20 @@ def test_a_scene_too_close_to_jamming_names_the_fraction_that_places(circles_cpu
     assert 0.99 < scale < 1.0 and fraction == pytest.approx(0.88 * scale ** 2, abs=1e-4)
     placed = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=box, radius=r * scale, scheme="discrete"))
     assert placed.stats()["max_overlap"] == 0
+
+
+@pytest.mark.parametrize("length", [1e-300, 1e300])
+def test_boxes_of_any_finite_size_have_an_area_fraction(circles_cpu, length):
+    """The area fraction is pi sum (r / W)(r / H): in a box of 1e-300 the squares of lengths
+    underflowed to 0 (0 / 0 raised ZeroDivisionError), in one of 1e300 they overflowed. One
+    circle of a quarter of the box's side fills pi / 16 of it, in a Scene's check as in
+    from_arrays'."""
+    from circles.scene import area_fraction
+
+    assert area_fraction([0.25 * length], (length, length)) == pytest.approx(math.pi / 16, rel=1e-15)
+    assert circles_cpu.Scene(n=3, box=(length, length), radius=0.25 * length).area_fraction == pytest.approx(
+        3 * math.pi / 16, rel=1e-15)
+    sim = circles_cpu.Simulation.from_arrays([[0.5 * length, 0.5 * length]], [[0.0, 0.0]], [0.25 * length],
+                                             box=(length, length))
+    assert sim.state().radius[0] == 0.25 * length
+    refused(lambda: circles_cpu.Scene(n=20, box=(length, length), radius=0.25 * length), "densest packing")
