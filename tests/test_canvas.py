@@ -264,3 +264,48 @@ def test_simulation_render_draws_its_state(canvas, circles_cpu, mode):
     s = sim.state()
     expected = canvas.render(s.pos, s.vel, s.radius, s.color, sim.box, 480, 270, mode)
     assert np.array_equal(sim.render(480, 270, mode), expected)
+
+
+def white(canvas, pos, r, periodic):
+    pos = np.atleast_2d(pos).astype(float)
+    n = len(pos)
+    return canvas.render(pos, np.zeros((n, 2)), np.full(n, r), np.full((n, 3), 255, np.uint8), (16.0, 9.0),
+                         320, 180, "random", (0, 0, 0), periodic=periodic)
+
+
+# C: corner copies on a torus.
+@pytest.mark.parametrize("centre", [(0.2, 0.2), (15.8, 8.8), (0.2, 8.8), (15.8, 0.2)])
+def test_periodic_circle_at_a_corner_shows_in_all_four_corners(canvas, centre):
+    image = white(canvas, centre, 0.5, True)  # 10 pixels
+    assert image[..., 0].sum() / 255 == pytest.approx(math.pi * 100, rel=0.03)
+    for row, col in ((0, 0), (0, 319), (179, 0), (179, 319)):
+        assert image[row, col, 0] == 255, (row, col)
+
+
+# E: the speed scale is twice the rms speed, and the colour is viridis at |v| / scale.
+def test_speed_colour_is_viridis_at_speed_over_twice_the_rms(canvas):
+    speeds = np.array([0.1, 2.0, 1.0, 0.5])
+    vel = np.stack([speeds, np.zeros(4)], 1)
+    pos = np.array([[2.0, 4.5], [6.0, 4.5], [10.0, 4.5], [14.0, 4.5]])
+    rms = math.sqrt(np.mean(speeds ** 2))
+    assert canvas.speed_scale_of(vel) == pytest.approx(2 * rms, rel=1e-12)
+    image = canvas.render(pos, vel, np.full(4, 1.0), np.zeros((4, 3), np.uint8), (16.0, 9.0), 320, 180, "speed",
+                          (0, 0, 0))
+    for (x, _), v in zip(pos, speeds):
+        top = len(canvas.VIRIDIS) - 1
+        u = min(v / (2 * rms), 1.0) * top
+        k = min(int(u), top - 1)
+        want = (1 - (u - k)) * canvas.VIRIDIS[k] + (u - k) * canvas.VIRIDIS[k + 1]
+        assert np.abs(image[90, int(x * 20)] - want).max() <= 1.0, v
+
+
+# O: Simulation.render after a reorder that followed an earlier render.
+def test_render_before_and_after_a_reorder_draws_the_state(canvas, circles_cpu):
+    from circles.simulation import REORDER_EVERY
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=3000, box=(16.0, 9.0), radius=(0.02, 0.06), speed=(0.5, 1.5),
+                                                   scheme="discrete", seed=4))
+    for _ in range(2):
+        s = sim.state()
+        expected = canvas.render(s.pos, s.vel, s.radius, s.color, sim.box, 480, 270, "random")
+        assert np.array_equal(sim.render(480, 270, "random"), expected), sim.steps
+        sim.step(REORDER_EVERY)

@@ -17,6 +17,7 @@ import pytest
 
 import circles
 from circles import cli
+from conftest import TEST_ARCH
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1",
@@ -432,3 +433,45 @@ def test_an_encoder_that_fails_exits_1_with_one_line_and_no_broken_file(tmp_path
     assert lines[0].startswith("circles: the run failed: ffmpeg failed to write run.mp4")
     assert "SIGXFSZ" in lines[0] and "removed the file" in lines[0]
     assert "wrote" not in result.stdout and not (tmp_path / "run.mp4").exists()
+
+
+# J: the CLI's frame k is the state at t = k / fps.
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the command line runs on the CPU here, the test's simulation on the GPU")
+def test_cli_frame_k_shows_the_state_at_k_over_fps(tmp_path, circles_cpu):
+    (tmp_path / "scene.toml").write_text(
+        'n = 30\nbox = [4.0, 3.0]\nradius = 0.1\nspeed = [1.0, 2.0]\nmass = "equal"\nseed = 5\n'
+        '[run]\nduration = 0.5\nfps = 10\nsize = "80x60"\ncolor = "random"\nout = "frames"\narch = "cpu"\n'
+        'threads = 1\n')
+    done = run_cli(["run", "scene.toml"], tmp_path)
+    assert done.returncode == 0, done.stderr
+    pngs = sorted((tmp_path / "frames").glob("frame_*.png"))
+    assert len(pngs) == 5
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(4.0, 3.0), radius=0.1, speed=(1.0, 2.0),
+                                                   mass="equal", seed=5))
+    for k, png in enumerate(pngs):
+        sim.advance(k / 10 - sim.time)
+        assert np.array_equal(iio.imread(png), sim.render(80, 60, "random")), k
+
+
+# N: a circle file overlapping across the y seam is refused, naming the pair.
+def test_circle_file_overlap_across_the_y_seam_is_refused(tmp_path):
+    from circles import scenefile
+    path = tmp_path / "c.toml"
+    path.write_text('box = [4.0, 3.0]\nboundary = "periodic"\n'
+                    '[[circle]]\npos = [2.0, 0.05]\nvel = [0.0, 0.0]\nradius = 0.2\n'
+                    '[[circle]]\npos = [2.0, 2.95]\nvel = [0.0, 0.0]\nradius = 0.2\n')
+    with pytest.raises(ValueError, match="circle 0 .* and circle 1 overlap"):
+        scenefile.read_circle_list(path)
+
+
+# U: the --seed flag places the scene with that seed.
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the command line runs on the CPU here, the test's simulation on the GPU")
+def test_cli_seed_flag_places_with_that_seed(tmp_path, circles_cpu):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-m", "circles.cli", "run", "--n", "30", "--box", "4", "3", "--radius", "0.1",
+                           "--speed", "1", "2", "--seed", "7", "--duration", "0.1", "--fps", "10", "--size", "80x60",
+                           "--out", "frames", "--arch", "cpu", "--threads", "1"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(4.0, 3.0), radius=0.1, speed=(1.0, 2.0), seed=7))
+    assert np.array_equal(iio.imread(tmp_path / "frames" / "frame_00000.png"), sim.render(80, 60))

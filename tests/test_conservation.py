@@ -130,3 +130,12 @@ def test_energy_round_off_does_not_drift_one_way(circles_cpu, radius, precision,
     st = sim.stats()
     assert st["pair_collisions"] > 200 * n
     assert abs(st["kinetic_energy"] / e0 - 1) < bound
+
+
+# R: stats sums in float64, also in a float32 simulation.
+def test_f32_stats_energy_is_the_float64_sum_over_the_state(circles_cpu):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=1000, box=(10.0, 10.0), radius=0.02, speed=(0.5, 1.5),
+                                                   mass="area", precision="f32", seed=2))
+    s = sim.state()
+    energy = 0.5 * np.sum(s.mass * (s.vel ** 2).sum(axis=1))
+    assert sim.stats()["kinetic_energy"] == pytest.approx(energy, rel=1e-14)

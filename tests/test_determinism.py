@@ -346,3 +346,15 @@ def test_ctrl_c_stops_between_steps_with_a_whole_state(tmp_path, scheme, call):
     assert bool(out["stopped"]) and int(out["steps"]) == 3 + 4
     assert float(out["time"]) == pytest.approx(float(out["straight_time"]), rel=1e-12)
     assert np.array_equal(out["pos"], out["straight_pos"]) and np.array_equal(out["vel"], out["straight_vel"])
+
+
+# T: state() hands back arrays of its own.
+def test_state_arrays_are_the_callers(circles_cpu):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(1.0, 1.0), radius=0.02, speed=(0.5, 1.0), seed=1))
+    s = sim.state()
+    radius, mass, color = s.radius.copy(), s.mass.copy(), s.color.copy()
+    s.radius[:] = 0.001
+    s.mass[:] = 7.0
+    s.color[:] = 0
+    t = sim.copy().state()
+    assert np.array_equal(t.radius, radius) and np.array_equal(t.mass, mass) and np.array_equal(t.color, color)

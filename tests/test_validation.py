@@ -343,3 +343,32 @@ def test_boxes_of_any_finite_size_have_an_area_fraction(circles_cpu, length):
                                              box=(length, length))
     assert sim.state().radius[0] == 0.25 * length
     refused(lambda: circles_cpu.Scene(n=20, box=(length, length), radius=0.25 * length), "densest packing")
+
+
+# F: overlaps across the seam of a periodic box.
+def test_overlap_across_the_periodic_seam_is_measured_and_refused(circles_cpu):
+    with pytest.raises(ValueError, match="overlap"):
+        circles_cpu.Simulation.from_arrays([[0.03, 0.5], [0.97, 0.5]], [[0.0, 0.0], [0.0, 0.0]], [0.05, 0.05],
+                                           box=(1.0, 1.0), boundary="periodic", scheme="discrete", dt=1e-3)
+    sim = circles_cpu.Simulation.from_arrays([[0.04, 0.5], [0.96, 0.5]], [[-1.0, 0.0], [1.0, 0.0]], [0.04, 0.04],
+                                             box=(1.0, 1.0), boundary="periodic", scheme="discrete", dt=1e-3)
+    sim.step(1)  # each moves 1e-3 towards the other across the seam: overlap 2e-3 / 0.08
+    assert sim.stats()["max_overlap"] == pytest.approx(0.025, rel=1e-9)
+
+
+# H: grid cells at least `reach` wide, whatever the fractional part of box / reach.
+@pytest.mark.parametrize("ratio", [3.7, 5.5, 5.7, 10.9])
+def test_grid_cells_are_at_least_reach_wide(circles_cpu, ratio):
+    from circles.grid import Grid
+    grid = Grid(1000, (1.0, 1.0), False)
+    ncx, ncy = grid.shape_for(1.0 / ratio)
+    assert 1.0 / ncx >= 1.0 / ratio and 1.0 / ncy >= 1.0 / ratio
+
+
+def test_overlap_two_cells_apart_is_refused(circles_cpu):
+    # Contact 0.1754 = reach in a 1 x 1 box: 5 cells a side; the circles sit in cells 0 and 1 of 5
+    # (cells 0 and 2 of 6 were the box cut into cells narrower than the reach).
+    r = 1.0 / 11.4
+    with pytest.raises(ValueError, match="overlap"):
+        circles_cpu.Simulation.from_arrays([[0.166, 0.5], [0.336, 0.5]], [[0, 0], [0, 0]], [r, r], box=(1.0, 1.0),
+                                           scheme="discrete", dt=1e-3)

@@ -339,3 +339,14 @@ def test_mp4_without_imageio_ffmpeg_says_what_to_install(tmp_path, monkeypatch):
     with pytest.raises(OutputError, match="pip install imageio-ffmpeg") as error:
         check_writable(tmp_path / "run.mp4", FPS)
     assert ".gif" in str(error.value)
+
+
+# K: a GIF's frame delays add up to the duration.
+@pytest.mark.parametrize("fps", [30, 7])
+def test_gif_frame_delays_sum_to_frames_over_fps(tmp_path, fps):
+    rng = np.random.default_rng(0)
+    with FrameWriter(tmp_path / "t.gif", fps) as writer:
+        for _ in range(fps):
+            writer.write(rng.integers(0, 255, (16, 16, 3), dtype=np.uint8))
+    total = sum(iio.immeta(tmp_path / "t.gif", index=i)["duration"] for i in range(fps))
+    assert total == pytest.approx(1000)  # ms: whole hundredths, rounded at each frame's end
