@@ -735,6 +735,17 @@ def _float_array(name, value, shape_tail, n):
     return np.ascontiguousarray(array)
 
 
+def _check_circles(pos, vel, radius, n):
+    """ValueError naming the first circle whose radius is not finite and > 0, or whose place or
+    velocity is not finite."""
+    for name, values in (("radius", radius), ("pos", pos), ("vel", vel)):
+        bad = ~np.isfinite(values) | ((values <= 0) if name == "radius" else False)
+        if bad.any():
+            i = int(np.flatnonzero(bad.reshape(n, -1).any(axis=1))[0])
+            raise ValueError(f"circle {i}'s {name} {values[i].tolist()} must be finite"
+                             + (" and > 0" if name == "radius" else ""))
+
+
 def letterbox(box, width, height):
     """Fit ``box`` = (W, H) into a width x height image, centred, aspect kept.
 
@@ -752,15 +763,18 @@ def speed_scale_of(vel):
     vel = np.asarray(vel, dtype=np.float64)
     if len(vel) == 0:
         return 1.0
+    squares = float(np.einsum("ij,ij->", vel, vel))
+    if 1e-280 < squares < math.inf:
+        return SPEED_RMS_MULTIPLE * math.sqrt(squares / len(vel))
     largest = float(np.max(np.abs(vel)))
     if not (largest > 0.0 and math.isfinite(largest)):
         return 1.0
-    unit = vel / largest  # so that no square overflows or underflows, whatever the units
+    unit = vel / largest  # speeds whose squares overflow or underflow: in units of the fastest
     return SPEED_RMS_MULTIPLE * largest * math.sqrt(float(np.einsum("ij,ij->", unit, unit)) / len(vel))
 
 
 def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="random",
-           background=(16, 16, 24), *, speed_scale=None, periodic=False):
+           background=(16, 16, 24), *, speed_scale=None, periodic=False, check=True):
     """Draw circles into a new RGB image.
 
     Args:
@@ -775,6 +789,9 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
       speed_scale: the speed shown at the top of the colormap; by default twice the rms
         speed of this frame. Pass a fixed value to keep colours fixed over a run.
       periodic: also draw, on the opposite side, the part of a circle that crosses an edge.
+      check: refuse radii that are not finite and > 0, places and velocities that are not
+        finite, and colours that are not 0-255 (ValueError naming the circle); a simulation's
+        own state, which holds none, skips this pass over the arrays.
 
     Returns:
       uint8 array of shape (height, width, 3), row 0 at the top.
@@ -790,15 +807,13 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
     n = radius.shape[0]
     pos = _float_array("pos", pos, (2,), n)
     vel = _float_array("vel", vel, (2,), n)
-    for name, values in (("radius", radius), ("pos", pos), ("vel", vel)):
-        bad = ~np.isfinite(values) | ((values <= 0) if name == "radius" else False)
-        if bad.any():
-            i = int(np.flatnonzero(bad.reshape(n, -1).any(axis=1))[0])
-            raise ValueError(f"circle {i}'s {name} {values[i].tolist()} must be finite"
-                             + (" and > 0" if name == "radius" else ""))
-    from .simulation import check_colors
+    if check:
+        _check_circles(pos, vel, radius, n)
+        from .simulation import check_colors
 
-    color = check_colors(color, n)
+        color = check_colors(color, n)
+    else:
+        color = np.ascontiguousarray(color, dtype=np.uint8)
     # World lengths in units of a power of two near the box's side (an exact scaling), so that
     # a box of any size draws in the float32 of the kernels.
     exponent = math.frexp(max(box_w, box_h))[1]

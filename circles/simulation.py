@@ -1381,7 +1381,7 @@ class Simulation:
             # A sum over circles: taken in creation order, so it does not follow the storage order.
             speed_scale = speed_scale_of(self._creation_order(vel))
         return render(pos, vel, radius, self._color_cache, self.box, width, height, color, periodic=self.periodic,
-                      speed_scale=speed_scale)
+                      speed_scale=speed_scale, check=False)
 
     # ------------------------------------------------------------ save / load
     def _fields(self) -> dict:
