@@ -1363,7 +1363,8 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
     claimed[lo:hi]. Returns the end of the list, or -1 when it runs out of room or meets a
     circle that another border claimed (a cluster across two borders)."""
     top = lo
-    if ti.atomic_min(label[i], -1 - b) >= 0:
+    # Within the border's share: past it lies the next border's list (or the array's end).
+    if ti.atomic_min(label[i], -1 - b) >= 0 and top < hi:
         claimed[top] = s
         top += 1
     else:

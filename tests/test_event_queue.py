@@ -538,3 +538,135 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
             assert sa[key] == sb[key], key
         assert np.array_equal(ev, other.events())
         assert two.cut_steps == other.cut_steps
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("per_bucket", [10**9, 1])
+def test_parts_calendar_any_bucket_width(circles_cpu, monkeypatch, per_bucket):
+    """Each part's queue keeps its calendar in its own buckets of the shared array of heads, from
+    info[k] // QUEUE_BUCKET_CIRCLES + k on (event.queue_parts): a part with fewer circles than a
+    bucket holds still takes one bucket of its own (the `+ k`). With buckets wider than a part
+    (every part one bucket) the parts' buckets would all be the first one without it, and
+    threads filling their parts' queues at once would pour each other's circles. However wide
+    the buckets, the state and the event log in parts equal the rounds' bit for bit. Parts of
+    2000 circles, so that the threads' first parts of a window fill their queues at the same
+    time (with parts of 200 the race was seen once in four runs; the suite's default width, 4
+    circles a bucket, never gives a part fewer than one bucket of its own)."""
+    from circles import event, simulation
+
+    side = 0.8 * np.sqrt(10)
+    scene = dict(SCENES["walls-f32-equal"], n=20000, box=(side, side))
+    rounds = run(circles_cpu, monkeypatch, scene, False, steps=10)
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event, "PART_CIRCLES", 2000)
+    monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", per_bucket)
+    sim = run(circles_cpu, monkeypatch, scene, True, steps=10)
+    if not sim._parts:
+        pytest.skip("one thread: no parts")
+    assert sim._part_shape()[0] >= 4 and sim.parts_run >= sim.steps
+    assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_cpu, monkeypatch):
+    """event.split_parts gives each border an equal share of `claimed` (its length over the
+    borders): a border whose clusters need even one slot more than that must fail the split
+    (return 0), for past its share lies the next border's list (or, for the last border, the
+    array's end). The scene and window of test_split_keeps_linked_circles_in_one_part: a first
+    split with room enough counts each border's claims; with a share one below the largest
+    count the split fails, and with a share equal to it the split holds, with the same lists,
+    each inside its own share."""
+    import taichi as ti
+
+    from circles import event
+    from circles.geometry import spans
+    from circles.simulation import SPEED_MARGIN
+
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event, "PART_CIRCLES", 300)
+    n, box = 4000, (1.0, 1.0)
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=box, radius=0.005, speed=(0.0, 1.0), boundary="walls",
+                                                   scheme="event", precision="f64", seed=2))
+    sim.step(3)
+    if not sim._parts:
+        pytest.skip("one thread: no parts")
+    vlim = SPEED_MARGIN * sim._max_speed()
+    window = 0.25 * sim.dt
+    g = sim.grid
+    g.build(sim.pos, 2 * sim._rmax + 2 * vlim * window)
+    parts, rows_per = sim._part_shape()
+    borders = parts - 1
+    rows, segs = spans(g.ncx, g.ncy, False)
+
+    def split(claimed):
+        ok = event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, claimed, sim._d1, sim._part_info,
+                               g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
+                               *box, 0.0, window, vlim, sim._link_allowance, False)
+        info = sim._part_info.to_numpy()
+        lo, hi = info[parts + 1:parts + 1 + borders], info[2 * parts + 1:2 * parts + 1 + borders]
+        return ok, lo, hi, claimed.to_numpy(), sim._label.to_numpy()
+
+    ok, lo, hi, roomy, label = split(sim._claimed)
+    count = hi - lo
+    most = int(count.max())
+    assert ok and parts >= 8 and most >= 3 and np.sum(label < 0) == count.sum()
+    tight = ti.ndarray(ti.i32, shape=(most - 1) * borders)
+    ok_tight = split(tight)[0]
+    exact = ti.ndarray(ti.i32, shape=most * borders)
+    ok_exact, lo_e, hi_e, lists, label_e = split(exact)
+    assert ok_tight == 0, f"a border with {most} claims held in a share of {most - 1}"
+    assert ok_exact == 1 and np.array_equal(hi_e - lo_e, count) and np.array_equal(label_e, label)
+    for b in range(borders):
+        assert b * most == lo_e[b] <= hi_e[b] <= (b + 1) * most
+        assert np.array_equal(np.sort(lists[lo_e[b]:hi_e[b]]), np.sort(roomy[lo[b]:hi[b]]))
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_a_split_that_fails_after_a_window_ran_refines_the_rest_of_the_step(circles_cpu, monkeypatch):
+    """A split that fails after some windows of a step ran (Simulation._queue_parts_step)
+    doubles the windows and the count of those done, so that the next window starts where the
+    last one ended: the windows that run tile the step, each from the end of the one before
+    and of positive length. The suite's scenes fail their splits only at a step's start (none
+    after a window ran, counted over 40 steps of the windows scene), so here the split is made
+    to fail once at the step's start (two windows) and once at the start of each step's second
+    window (four); the state and event log must still equal the rounds' bit for bit."""
+    from circles import event, simulation
+
+    scene = PARTS_SCENES["walls-f32-equal"]
+    rounds = run(circles_cpu, monkeypatch, scene, False)
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    monkeypatch.setattr(simulation, "PART_CLAIMS", 4)
+    split = event.split_parts
+    steps = []  # per step (a split that holds at time 0 starts one): (start, length) of its windows
+    state = {"start_failed": False, "step_failed": True, "mid_step_failures": 0, "sim": None}
+
+    def failing_split(*args):
+        t, length = args[-5], args[-4]
+        if t == 0 and not state["start_failed"]:
+            state["start_failed"] = True
+            return 0
+        if t > 0 and not state["step_failed"] and state["sim"]._windows < simulation.MOST_WINDOWS:
+            state["step_failed"] = True
+            state["mid_step_failures"] += 1
+            return 0
+        ok = split(*args)
+        if ok:
+            if t == 0:
+                steps.append([])
+                state["step_failed"] = False
+            steps[-1].append((t, length))
+        return ok
+
+    monkeypatch.setattr(event, "split_parts", failing_split)
+    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", True)
+    sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene), record_events=100_000)
+    if not sim._parts:
+        pytest.skip("one thread: no parts")
+    state["sim"] = sim
+    sim.step(25)
+    assert state["mid_step_failures"] >= 3  # splits failed after a window had run
+    for windows in steps:
+        assert all(length > 0 for _, length in windows), windows
+        assert all(b[0] == pytest.approx(a[0] + a[1], rel=1e-12) for a, b in zip(windows, windows[1:])), windows
+    assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
