@@ -206,8 +206,8 @@ def _color(name, value):
 
 
 def _check_inside(pos, radius, box, boundary, slack):
-    """Every circle inside the walls, or across one by at most `slack` (the rounding of a place,
-    as `Simulation.from_arrays` allows)."""
+    """Every circle inside the walls, or across one by at most `slack` (the rounding of a place),
+    tested as `Simulation.from_arrays` tests it (`simulation.outside_walls`)."""
     w, h = box
     if boundary == "periodic":
         # Positions wrap around the torus; a circle must not meet two images of one neighbour.
@@ -219,8 +219,9 @@ def _check_inside(pos, radius, box, boundary, slack):
                              f"periodic box {w} x {h}: each side must exceed two diameters "
                              f"({4.0 * r:.6g}); use a smaller circle or a bigger box")
         return
-    lo = radius - slack
-    outside = ((pos[:, 0] < lo) | (pos[:, 0] > w - lo) | (pos[:, 1] < lo) | (pos[:, 1] > h - lo))
+    from .simulation import outside_walls
+
+    outside = outside_walls(pos, radius, box, slack)
     if outside.any():
         i = int(np.flatnonzero(outside)[0])
         r = float(radius[i])

@@ -224,6 +224,12 @@ def check_circles(pos, vel, radius, precision):
         raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
 
 
+def outside_walls(pos, radius, box, slack):
+    """Which circles cross a wall of the box by more than `slack` (a length): (n,) booleans."""
+    lo, hi = radius - slack, np.array(box) - radius[:, None] + slack
+    return np.any((pos < lo[:, None]) | (pos > hi), axis=1)
+
+
 def check_placed(pos, radius, box, boundary, slack):
     """Given places for the radii: the largest circle fits the box, the circles' area fits the
     densest packing, and in a walled box every circle lies inside the walls, or crosses one by
@@ -233,8 +239,7 @@ def check_placed(pos, radius, box, boundary, slack):
     w, h = box
     check_area_fraction(area_fraction(radius, box), n, box)
     if boundary == "walls":
-        lo, hi = radius - slack, np.array(box) - radius[:, None] + slack
-        out = np.any((pos < lo[:, None]) | (pos > hi), axis=1)
+        out = outside_walls(pos, radius, box, slack)
         if np.any(out):
             i = int(np.flatnonzero(out)[0])
             at = tuple(float(x) for x in pos[i])
