@@ -397,15 +397,23 @@ class _GifSink:
         delay = round((index + 1) * 100 / self.fps) - round(index * 100 / self.fps)
         return min(max(delay, 2), GIF_MAX_DELAY)
 
-    def _open(self, image):
+    @staticmethod
+    def _own_palette(image):
+        """The image in 256 colours of its own (median cut, undithered)."""
         from PIL import Image
 
-        self._palette_image = image.quantize(256, method=Image.Quantize.MEDIANCUT,
-                                             dither=Image.Dither.NONE)
-        palette = bytes(self._palette_image.getpalette()[:768]).ljust(768, b"\0")
+        return image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+
+    @staticmethod
+    def _color_table(indexed):
+        """The 256-colour table (768 bytes) of a palette image."""
+        return bytes(indexed.getpalette()[:768]).ljust(768, b"\0")
+
+    def _open(self, image):
+        self._palette_image = self._own_palette(image)
         width, height = image.size
         header = (b"GIF89a" + width.to_bytes(2, "little") + height.to_bytes(2, "little")
-                  + bytes([0xF7, 0, 0]) + palette
+                  + bytes([0xF7, 0, 0]) + self._color_table(self._palette_image)
                   # Application extension: loop forever.
                   + b"!\xff\x0bNETSCAPE2.0\x03\x01\x00\x00\x00")
         try:
@@ -429,12 +437,11 @@ class _GifSink:
             self._first_off = off
         local = off > GIF_LOCAL_SHARE and off > 2.0 * self._first_off
         if local:
-            indexed = image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+            indexed = self._own_palette(image)
         image_data = b"".join(GifImagePlugin.getdata(indexed))
         if local:
             # The image descriptor (10 bytes) flags a local table of 256 colours, which follows it.
-            table = bytes(indexed.getpalette()[:768]).ljust(768, b"\0")
-            image_data = image_data[:9] + bytes([0x87]) + table + image_data[10:]
+            image_data = image_data[:9] + bytes([0x87]) + self._color_table(indexed) + image_data[10:]
         # Graphic control extension: keep the frame (disposal 1), then wait the delay.
         data = b"".join([b"!\xf9\x04\x04" + self._delay(self._index).to_bytes(2, "little")
                          + b"\x00\x00", image_data])
