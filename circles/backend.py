@@ -1,7 +1,10 @@
 """Taichi runtime set-up: `circles.init` wraps `ti.init`; nothing here runs at import."""
 from __future__ import annotations
 
+import contextlib
 import difflib
+import io
+import math
 
 import taichi as ti
 
@@ -42,11 +45,14 @@ def init(arch: str = "auto", **options) -> str:
         ti.reset()
     _state["runtime"] += 1  # the arrays of every earlier runtime are gone (`runtime`)
     _state.update(initialized=False, arch=None)  # until ti.init succeeds: the next use starts anew
-    if arch == "cpu":
-        ti.init(arch=ti.cpu, **options)
-    else:
-        # Named GPU backends, not ti.gpu: its OpenGL probe can crash a machine without a display.
-        ti.init(arch=[ti.cuda, ti.vulkan, ti.metal], **options)
+    # ti.init prints "[Taichi] Starting on arch=..." on stdout; circles' output is its own (the
+    # arch is what init returns, and the command line's summary names it).
+    with contextlib.redirect_stdout(io.StringIO()):
+        if arch == "cpu":
+            ti.init(arch=ti.cpu, **options)
+        else:
+            # Named GPU backends, not ti.gpu: its OpenGL probe can crash a machine without a display.
+            ti.init(arch=[ti.cuda, ti.vulkan, ti.metal], **options)
     used = ti.lang.impl.current_cfg().arch
     name = "cpu" if used in (ti.x64, ti.arm64) else "gpu"
     if arch == "gpu" and name == "cpu":
@@ -81,13 +87,54 @@ def _check_options(options):
             raise ValueError(f"circles.init: option {name!r} is not one that ti.init takes: {hint}see ti.init's "
                              "documentation for its options (for example cpu_max_num_threads)")
         if name in fields and name not in ("default_fp", "default_ip"):
-            convert = type(getattr(scratch, name))
-            try:
-                setattr(scratch, name, value if convert is bool else convert(value))
-            except (TypeError, ValueError):
-                raise ValueError(f"circles.init: option {name} = {value!r} is not a value ti.init takes: give "
-                                 f"{_KINDS.get(convert.__name__, convert.__name__)}, as its default "
-                                 f"{getattr(scratch, name)!r} is") from None
+            _check_field(scratch, name, value)
+        elif name in _TYPE_OPTIONS:
+            if not any(value is kind for kind in _TYPE_OPTIONS[name]):
+                names = " or ".join(f"ti.{kind}" for kind in _TYPE_OPTIONS[name])
+                shown = f"ti.{value}" if isinstance(value, type(ti.f32)) else repr(value)
+                raise ValueError(f"circles.init: option {name} = {shown} is not a value ti.init takes: give {names}")
+        elif name == "log_level":
+            if not (isinstance(value, str) and value.lower() in _LOG_LEVELS):
+                raise ValueError(f"circles.init: option log_level = {value!r} is not a value ti.init takes: give one "
+                                 f"of {', '.join(map(repr, _LOG_LEVELS))} (ti.ERROR, circles' default, is 'error')")
+
+
+#: The types ti.init takes for these options, and the levels it takes for log_level.
+_TYPE_OPTIONS = {"default_fp": (ti.f16, ti.f32, ti.f64), "default_ip": (ti.i32, ti.i64)}
+_LOG_LEVELS = ("trace", "debug", "info", "warn", "error", "critical")
+
+
+def _int_range(name):
+    """The least and largest values of an integer field of the compile configuration (a C int,
+    or an unsigned 64-bit one)."""
+    probe = ti._lib.core.CompileConfig()
+    for lo, hi in ((-2 ** 31, 2 ** 31 - 1), (0, 2 ** 64 - 1)):
+        try:
+            setattr(probe, name, lo)
+            setattr(probe, name, hi)
+            return lo, hi
+        except TypeError:
+            pass
+    return 0, 2 ** 31 - 1
+
+
+def _check_field(scratch, name, value):
+    """Refuse a value of a compile configuration field that ti.init would not take, or that it
+    takes and then fails on (a thread count below 1 ends the process at the first kernel)."""
+    current = getattr(scratch, name)
+    convert = type(current)
+    try:
+        setattr(scratch, name, value if convert is bool else convert(value))
+    except (TypeError, ValueError, OverflowError):
+        what = _KINDS.get(convert.__name__, convert.__name__)
+        if convert is int and isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            lo, hi = _int_range(name)
+            what = f"a whole number from {1 if name == 'cpu_max_num_threads' else lo} to {hi}"
+        raise ValueError(f"circles.init: option {name} = {value!r} is not a value ti.init takes: give {what}, "
+                         f"as its default {current!r} is") from None
+    if name == "cpu_max_num_threads" and getattr(scratch, name) < 1:
+        raise ValueError(f"circles.init: option cpu_max_num_threads = {value!r} is not a thread count: give 1 or "
+                         "more, or leave it out to run on all of the CPU's threads")
 
 
 def ensure_init() -> str:

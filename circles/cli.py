@@ -26,7 +26,6 @@ second at once; neither cuts short the writing of a frame or the finishing of th
 
 import argparse
 import contextlib
-import io
 import math
 import os
 import re
@@ -376,10 +375,7 @@ def _run(scene, options):
     started = time.perf_counter()
     try:
         threads = options["threads"]
-        # ti.init prints "[Taichi] Starting on arch=..." on stdout; the summary names the arch.
-        with contextlib.redirect_stdout(io.StringIO()):
-            arch = circles.init(options["arch"],
-                                **({"cpu_max_num_threads": threads} if threads else {}))
+        arch = circles.init(options["arch"], **({"cpu_max_num_threads": threads} if threads else {}))
         # Placement can still refuse a scene that passed the checks of Scene, and
         # from_arrays checks what a CircleList leaves to it (such as the area fraction).
         sim = _simulation(scene)

@@ -35,6 +35,8 @@ from taichi.lang import impl
 from taichi.lang._ndarray import Ndarray
 from taichi.types import ndarray_type, primitive_types, template
 
+from .backend import on_restart
+
 _NDARRAY, _FLOAT, _INT = 0, 1, 2
 _SIGNED_IDS = {id(t) for t in (ti.i8, ti.i16, ti.i32, ti.i64, int)}
 #: Template values the fast path keys on as they are (anything else goes through Taichi).
@@ -46,6 +48,8 @@ _INT_VALUES = (int, np.integer)
 _MAX_ENTRIES = 64
 #: Whether calls may take the fast path at all (tests turn it off to compare).
 enabled = True
+#: Every FastKernel made, so that a restart of the runtime can make each let go of it.
+_kernels = weakref.WeakSet()
 
 
 def _picker(indices):
@@ -125,6 +129,13 @@ class FastKernel:
         self._cpu = False
         self._compiled = {}  # array types and template values -> compiled kernel
         self._bindings = {}  # template values and array identities -> _Binding
+        _kernels.add(self)
+
+    def _forget(self):
+        """Drop the program, compiled kernels and launch contexts of the running runtime."""
+        self._program = None
+        self._compiled = {}
+        self._bindings = {}
 
     def _types_key(self, args):
         """The combination the compiled kernel depends on; None when an argument is not covered.
@@ -228,6 +239,16 @@ class FastKernel:
         if self._ret_getter is not None:
             return getattr(ctx, self._ret_getter)((0,))
         return self._primal.construct_kernel_ret(ctx, self._returns[0], (0,))
+
+
+@on_restart
+def _forget_runtime():
+    """Before `circles.init` restarts the runtime, every fast kernel lets go of the running
+    program and of what it compiled and bound. Kept past the restart, the old program's last
+    reference was dropped at a later call, after `ti.reset` had finalised it, and the process
+    then crashed within a few restarts (Taichi 1.7 on a CPU)."""
+    for fast in list(_kernels):
+        fast._forget()
 
 
 def kernel(fn):

@@ -207,15 +207,19 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
 
 
 RESTART = """
-import sys
+import io, sys
 import numpy as np
+import taichi as ti
 import circles
+sys.stdout = io.StringIO()  # what circles prints (its output is its own: nothing here)
 circles.init(arch="cpu")
 scene = circles.Scene(n=300, box=(4.0, 3.0), radius=(0.04, 0.06), seed=9)
 a = circles.Simulation(scene)
 a.step(3)
 unknown = []
-for options in ({"cpu_max_num_thread": 1}, {"cpu_max_num_threads": "two"}, {"debug": "yes"}):
+for options in ({"cpu_max_num_thread": 1}, {"cpu_max_num_threads": "two"}, {"debug": "yes"},
+                {"cpu_max_num_threads": 0}, {"cpu_max_num_threads": -1}, {"cpu_max_num_threads": 2 ** 40},
+                {"default_fp": "x"}, {"default_ip": ti.f32}, {"log_level": "nonsense"}):
     try:
         circles.init(arch="cpu", **options)  # refused before the runtime is touched
     except ValueError as error:
@@ -241,8 +245,19 @@ c.step(6)
 c.render(64, 36)
 d = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=9, scheme="discrete"))
 d.step(2)
-np.savez(sys.argv[2], pos_before=before.pos, vel_before=before.vel, pos=c.state().pos, vel=c.state().vel,
-         refused=np.array(refused), pairs=d.stats()["pair_collisions"], unknown=np.array(unknown))
+c_pos, c_vel, pairs = c.state().pos, c.state().vel, d.stats()["pair_collisions"]
+# Restarts in a row, each runtime running both schemes and drawing (a fast kernel kept the
+# program of the runtime before; dropped after its end, it crashed the process within a few).
+for k in range(6):
+    circles.init(arch="cpu", cpu_max_num_threads=1 + k % 2)
+    for name in ("event", "discrete"):
+        e = circles.Simulation(circles.Scene(n=300, box=(4.0, 3.0), radius=0.05, seed=k, scheme=name))
+        e.advance(0.3)
+        e.render(64, 36)
+        assert e.stats()["pair_collisions"] > 0
+with open(sys.argv[2], "wb") as out:
+    np.savez(out, pos_before=before.pos, vel_before=before.vel, pos=c_pos, vel=c_vel, refused=np.array(refused),
+             pairs=pairs, unknown=np.array(unknown), printed=sys.stdout.getvalue())
 """
 
 
@@ -255,11 +270,18 @@ def test_a_restart_of_the_runtime_leaves_old_simulations_refusing_and_new_ones_e
     the running runtime and then fails; the package was left unusable, and a runtime started
     after such a failure could crash the process), so the simulations made before go on."""
     out = run_script(RESTART, "cpu", tmp_path / "restart.npz", timeout=600)
+    assert str(out["printed"]) == "", out["printed"]  # ti.init prints a line at each start
     unknown = out["unknown"].tolist()
-    assert len(unknown) == 3, unknown
+    assert len(unknown) == 9, unknown
     assert "'cpu_max_num_thread' is not one that ti.init takes: did you mean cpu_max_num_threads?" in unknown[0]
     assert "cpu_max_num_threads = 'two' is not a value ti.init takes: give a whole number" in unknown[1]
     assert "debug = 'yes' is not a value ti.init takes: give True or False" in unknown[2]
+    for shown in ("0", "-1"):  # ti.init takes both; the first kernel then ends the process
+        assert f"cpu_max_num_threads = {shown} is not a thread count: give 1 or more" in unknown.pop(3)
+    assert "= 1099511627776 is not a value ti.init takes: give a whole number from 1 to 2147483647" in unknown[3]
+    assert "default_fp = 'x' is not a value ti.init takes: give ti.f16 or ti.f32 or ti.f64" in unknown[4]
+    assert "default_ip = ti.f32 is not a value ti.init takes: give ti.i32 or ti.i64" in unknown[5]
+    assert "log_level = 'nonsense' is not a value ti.init takes: give one of 'trace'" in unknown[6]
     assert sorted(out["refused"].tolist()) == ["advance", "events", "render", "save", "state", "stats", "step"]
     assert np.array_equal(out["pos"], out["pos_before"]) and np.array_equal(out["vel"], out["vel_before"])
     assert int(out["pairs"]) > 0
