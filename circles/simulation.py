@@ -92,6 +92,10 @@ DISCRETE_UNIFORM = True
 DISCRETE_FIRST_IN_PARTS = True
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
+#: The most by which the simulated clock (float64) may count a step or an advance wrong, as a
+#: fraction of its length (`Simulation._check_clock_counts`): at a time whose float64 unit is
+#: coarser, steps of that length are refused rather than counted as another length.
+CLOCK_TOLERANCE = 2.0 ** -20
 #: Two-level grid in a walled box (the discrete scheme, and the event scheme's queue): circles
 #: larger than this many times the median radius are "large" when they are at most
 #: TWO_LEVEL_MAX_FRACTION of all; the cells are then sized for the others, and each large circle
@@ -921,12 +925,39 @@ class Simulation:
     def _release(self):
         """Let go of every Taichi array (and the grid and views that hold them); what describes
         the simulation (n, box, scheme, time, ...) stays, so it still prints."""
-        keep = {"scene", "n", "box", "boundary", "scheme", "precision", "periodic", "dt", "time", "steps",
+        keep = {"scene", "n", "box", "boundary", "scheme", "precision", "periodic", "_dt", "_time", "steps",
                 "_runtime"}
         for name in list(vars(self)):
             if name not in keep:
                 delattr(self, name)
         _LIVE.discard(self)
+
+    @property
+    def dt(self) -> float:
+        """The step length in simulated seconds. It may be set between steps: to a number > 0,
+        or to None for the one the scene would choose from the circles' speeds now."""
+        return self._dt
+
+    @dt.setter
+    def dt(self, value):
+        dt = check_dt(value)
+        if dt is None:
+            state = self.state()
+            dt = default_dt(self.scheme, state.radius, state.vel)
+        self._dt = dt
+
+    @property
+    def time(self) -> float:
+        """The simulated clock in seconds. It may be set to any finite time >= 0, for example
+        to start it again from 0 once its resolution has grown too coarse for the steps."""
+        return self._time
+
+    @time.setter
+    def time(self, value):
+        value = _scalar(value)
+        if isinstance(value, bool) or not isinstance(value, Real) or not (0 <= value < math.inf):
+            raise ValueError(f"time {value!r} must be a finite number of simulated seconds >= 0")
+        self._time = float(value)
 
     def advance(self, duration: float):
         """Advance by `duration` of simulated time, ending exactly at the old time + duration."""
@@ -936,12 +967,14 @@ class Simulation:
                 or duration < 0:
             raise ValueError(f"duration {duration!r} must be a finite number of simulated seconds >= 0")
         duration = float(duration)
+        self._check_clock_counts(duration, "duration")
         end = self.time + duration
         with _whole_steps() as steps:
             while self.time < end:
                 left = end - self.time
                 h = min(self.dt, left)
-                self._check_clock_moves(h)
+                if h < left:
+                    self._check_clock_counts(h, "dt")
                 done = self._step(h)
                 # The last piece ends at `end` itself: time + (end - time) can round a unit
                 # below it, which would cost a step of a unit's length more.
@@ -957,8 +990,8 @@ class Simulation:
                     raise ValueError(f"a step was cut to {done:g} s, below the resolution of the simulated clock "
                                      f"at time {self.time:g} ({np.spacing(self.time):g}): the clock cannot follow "
                                      f"the steps (the circles are at time {self.time:g} to within it); start the "
-                                     "clock again from 0 with Simulation.from_arrays(sim.state() ...), or, in a "
-                                     "periodic box, lower the speeds or enlarge the box")
+                                     "clock again with sim.time = 0, or, in a periodic box, lower the speeds or "
+                                     "enlarge the box")
             self.time = end
         self._check_finite()
         return self
@@ -969,10 +1002,9 @@ class Simulation:
         k = _scalar(k)
         if isinstance(k, bool) or not isinstance(k, Real) or not math.isfinite(k) or int(k) != k or k < 0:
             raise ValueError(f"k = {k!r} must be a whole number of steps >= 0")
-        if k > 0:
-            self._check_clock_moves(self.dt)
         with _whole_steps() as steps:
             for _ in range(int(k)):
+                self._check_clock_counts(self.dt, "dt")
                 done = 0.0
                 while done < self.dt:
                     done += self._step(self.dt - done)
@@ -984,11 +1016,17 @@ class Simulation:
         self._check_finite()
         return self
 
-    def _check_clock_moves(self, h):
-        """Refuse a step of length h that the simulated clock, at its time now, cannot count."""
-        if self.time + h == self.time:
-            raise ValueError(f"dt = {h:g} is below the resolution of the simulated clock at time {self.time:g} "
-                             f"({np.spacing(self.time):g}): the clock would not move; give a larger dt")
+    def _check_clock_counts(self, h, what):
+        """Refuse a step (or an advance) of length h > 0 that the simulated clock, at its time
+        now, would count off by more than CLOCK_TOLERANCE of h: the circles would move by h
+        and the clock by another length (at time 1e14 float64 counts in units of 1/64, so a
+        step of 0.01 counted as 0.015625)."""
+        moved = (self.time + h) - self.time
+        if h > 0 and abs(moved - h) > CLOCK_TOLERANCE * h:
+            unit = float(np.spacing(self.time + h))
+            raise ValueError(f"{what} = {h:g} is too short for the simulated clock at time {self.time:g}, which "
+                             f"counts in units of {unit:.3g} (it would count {h:g} as {moved:.6g}): give a {what} "
+                             f"of at least {unit / CLOCK_TOLERANCE:.3g}, or start the clock again with sim.time = 0")
 
     def _step(self, h):
         if self.scheme == "event":

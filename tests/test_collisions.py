@@ -484,11 +484,41 @@ def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circ
     slow_clock = circles_cpu.Simulation.from_arrays(pos, np.array([[1.0, 0.0], [0.0, 0.0]]), radius,
                                                     box=(4.0, 3.0), dt=1e-12)
     slow_clock.time = 1e6  # as a loaded long run's: float64 counts 1.2e-10 there
-    with pytest.raises(ValueError, match=r"dt = 1e-12 is below the resolution of the simulated clock"):
+    with pytest.raises(ValueError, match=r"dt = 1e-12 is too short for the simulated clock at time 1e\+06, which "
+                                         r"counts in units of 1.16e-10 \(it would count 1e-12 as 0\): give a dt of "
+                                         r"at least 0.000122, or start the clock again with sim.time = 0"):
         slow_clock.advance(1.0)
-    with pytest.raises(ValueError, match=r"dt = 1e-12 is below the resolution of the simulated clock"):
+    with pytest.raises(ValueError, match=r"dt = 1e-12 is too short for the simulated clock"):
         slow_clock.step(3)  # it moved the circles and left the clock where it was
     assert slow_clock.steps == 0 and np.array_equal(slow_clock.state().pos, pos)
+    # A clock that moves, but by another length than the circles: at 1e14 float64 counts in
+    # units of 1/64, and steps of 0.01 were counted as 0.015625 each (an advance of 1.0 moved
+    # the circles by 0.64), and at 1e16 an advance of 1.0 was rounded away, with no error.
+    coarse = circles_cpu.Simulation.from_arrays(pos, np.array([[0.1, 0.0], [0.0, 0.0]]), radius, box=(4.0, 3.0),
+                                                dt=0.01)
+    coarse.time = 1e14
+    for call in (lambda: coarse.advance(1.0), lambda: coarse.step(1)):
+        with pytest.raises(ValueError, match=r"dt = 0.01 is too short .* \(it would count 0.01 as 0.015625\)"):
+            call()
+    coarse.dt = 1.0 / 64  # counted exactly there
+    coarse.advance(1.0)
+    assert coarse.time == 1e14 + 1.0 and coarse.steps == 64
+    assert coarse.state().pos[0, 0] == pytest.approx(1.0 + 0.1, rel=1e-12)
+    coarse.time, coarse.dt = 1e16, 1.0
+    with pytest.raises(ValueError, match=r"duration = 1 is too short .* counts in units of 2 \(it would count 1 as 0"):
+        coarse.advance(1.0)
+    coarse.time = 0  # the fix the message names
+    coarse.advance(1.0)
+    assert coarse.time == 1.0 and coarse.state().pos[0, 0] == pytest.approx(1.2, rel=1e-12)
+    # dt and time take what a Scene takes (a dt of -0.01 ran the clock backwards before).
+    for name, value, why in (("dt", -0.01, "must be > 0"), ("dt", float("nan"), "not finite"),
+                             ("time", -1.0, "must be a finite number of simulated seconds >= 0"),
+                             ("time", float("inf"), "must be a finite number"), ("time", True, "must be")):
+        with pytest.raises(ValueError, match=f"{name} .*{why}"):
+            setattr(coarse, name, value)
+    assert (coarse.dt, coarse.time) == (1.0, 1.0)
+    coarse.dt = None  # the scene's choice for the speeds now
+    assert coarse.dt == pytest.approx(circles_cpu.simulation.EVENT_STEP_RADII * 0.1 / 0.1, rel=1e-15)
     # A periodic box cuts each step to (W/2 - 2 rmax) / (2 vlim), 0.59 s here, below the clock's
     # resolution at 1e16 (2 s), where dt (10 s) is not: advance stopped never.
     torus = circles_cpu.Simulation.from_arrays(pos, np.array([[1.0, 0.0], [0.0, 1.0]]), radius, box=(4.0, 3.0),
