@@ -552,7 +552,7 @@ def test_parts_calendar_any_bucket_width(circles_cpu, monkeypatch, per_bucket):
     2000 circles, so that the threads' first parts of a window fill their queues at the same
     time (with parts of 200 the race was seen once in four runs; the suite's default width, 4
     circles a bucket, never gives a part fewer than one bucket of its own)."""
-    from circles import event, simulation
+    from circles import event
 
     side = 0.8 * np.sqrt(10)
     scene = dict(SCENES["walls-f32-equal"], n=20000, box=(side, side))
