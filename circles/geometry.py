@@ -11,7 +11,7 @@ aligned for scalars, and on CUDA a float64 vector read from there faults (misali
 """
 import taichi as ti
 
-#: "No event": larger than any step, representable in float32.
+#: "No event": larger than any step (`scene.MAX_DT`), representable in float32.
 NEVER = 1.0e30
 
 #: Wall codes stored as partners: -1 is x = 0, -2 is x = W, -3 is y = 0, -4 is y = H.

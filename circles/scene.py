@@ -21,7 +21,15 @@ PRECISIONS = ("f32", "f64")
 DENSEST_PACKING = math.pi / math.sqrt(12.0)
 
 
+def scalar(x):
+    """A 0-d numpy array of numbers (not of bools) as its number; anything else as it is."""
+    if isinstance(x, np.ndarray) and x.ndim == 0 and np.issubdtype(x.dtype, np.number):
+        return x.item()
+    return x
+
+
 def _finite(name, value):
+    value = scalar(value)
     if isinstance(value, bool) or not isinstance(value, Real):
         raise ValueError(f"{name} = {value!r} is not a number")
     if not math.isfinite(float(value)):
@@ -31,14 +39,15 @@ def _finite(name, value):
 
 def check_count(name, value, meaning=""):
     """A whole number >= 0 (not a bool); `meaning`, when given, is said in the error."""
+    value = scalar(value)
     if isinstance(value, bool) or not isinstance(value, Integral) or value < 0:
         raise ValueError(f"{name} = {value!r} must be a whole number >= 0" + (f" ({meaning})" if meaning else ""))
     return int(value)
 
 
-def _choice(name, value, allowed):
-    if value not in allowed:
-        raise ValueError(f"{name} {value!r} is unknown: use one of {', '.join(map(repr, allowed))}")
+def _choice(name, value, allowed, hint=""):
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"{name} {value!r} is unknown: use one of {', '.join(map(repr, allowed))}{hint}")
     return value
 
 
@@ -66,6 +75,7 @@ def check_box(box):
 
 def check_pair_range(name, value, lower_ok):
     """A scalar or a (low, high) pair, returned as (low, high)."""
+    value = scalar(value)
     if isinstance(value, Real) and not isinstance(value, bool):
         lo = hi = _finite(name, value)
     else:
@@ -82,12 +92,21 @@ def check_pair_range(name, value, lower_ok):
     return lo, hi
 
 
+#: The longest step. Times within a step, and the keys that order collisions, are kept below
+#: `geometry.NEVER` (1e30, the mark of "no event"); a step 1000 times shorter leaves them room
+#: (a pair in a box 1e35 wide, its speeds 1, with the default step of 3e33, collided without end).
+MAX_DT = 1e27
+
+
 def check_dt(dt):
     if dt is None:
         return None
     dt = _finite("dt", dt)
     if dt <= 0:
         raise ValueError(f"dt = {dt} must be > 0 (or None to choose it from the scene)")
+    if dt > MAX_DT:
+        raise ValueError(f"dt = {dt:g} is above {MAX_DT:g}, the longest step (times within a step stay below 1e30, "
+                         "the mark of no event): give a shorter dt, or measure times in a smaller unit")
     return dt
 
 
@@ -104,6 +123,45 @@ def check_speed(vmax, precision, what="speed"):
         raise ValueError(f"{what} {vmax:g} is above {limit:g}, the largest speed {precision} arithmetic holds "
                          "with room (times of impact and energies square it): measure lengths and times in "
                          "other units, so that speeds come out smaller")
+
+
+#: The bounds of a scene's lengths, and of their products with its largest speed, by
+#: precision. Times of impact square contact distances and their products with speeds, and
+#: take differences of such squares. Least: the square root of the least normal number over
+#: the unit round-off, so that those squares keep the precision's full relative precision
+#: (Taichi's CPU code also flushes numbers below the least normal to 0: a collision of circles
+#: 1e-17 wide and as slow was never found in f32). Largest: the square root of an eighth of
+#: the largest number, so that a difference of two such squares of a box's side and twice a
+#: speed stays finite (a box 1e25 wide in f32 overflowed every squared distance, and its
+#: circles passed through each other). The least radius, and its product with the largest
+#: speed, must be at least the least; the box's sides, and their products with the largest
+#: speed, at most the largest.
+MIN_LENGTH = {"f32": 4.5e-16, "f64": 1.5e-146}
+MAX_LENGTH = {"f32": 6.5e18, "f64": 4.7e153}
+
+
+def check_scale(box, rmin, vmax, precision):
+    """Refuse a scene whose lengths, or their products with its largest speed, lie beyond
+    MIN_LENGTH and MAX_LENGTH of its precision."""
+    lo, hi = MIN_LENGTH[precision], MAX_LENGTH[precision]
+    side = max(box)
+    other = ", or use precision 'f64'" if precision == "f32" else ""
+    room = (f"{precision} arithmetic squares with full precision (times of impact square lengths and their "
+            "products with speeds)")
+    if side > hi:
+        raise ValueError(f"the box side {side:g} is above {hi:g}, the longest length {room}: measure lengths in a "
+                         f"larger unit{other}")
+    if rmin < lo:
+        raise ValueError(f"radius {rmin:g} is below {lo:g}, the least length {room}: measure lengths in a smaller "
+                         f"unit{other}")
+    if vmax > 0 and side * vmax > hi:
+        raise ValueError(f"the box side {side:g} times the largest speed {vmax:g} is {side * vmax:.3g}, above "
+                         f"{hi:g}, the most {room}: measure lengths or times in other units, so that it comes out "
+                         f"smaller{other}")
+    if vmax > 0 and rmin * vmax < lo:
+        raise ValueError(f"the least radius {rmin:g} times the largest speed {vmax:g} is {rmin * vmax:.3g}, below "
+                         f"{lo:g}, the least {room}: measure lengths or times in other units, so that it comes out "
+                         f"larger{other}")
 
 
 def check_fits(rmax, box, boundary):
@@ -188,6 +246,7 @@ class Scene:
     seed: int = 0
 
     def __post_init__(self):
+        object.__setattr__(self, "n", scalar(self.n))
         if isinstance(self.n, bool) or not isinstance(self.n, Integral):
             raise ValueError(f"n = {self.n!r} must be a whole number of circles")
         if self.n <= 0:
@@ -195,7 +254,7 @@ class Scene:
         box = check_box(self.box)
         rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
         vlo, vhi = check_pair_range("speed", self.speed, lambda v: v >= 0)
-        _choice("mass model", self.mass, MASS_MODELS)
+        _choice("mass model", self.mass, MASS_MODELS, " (masses of your own go to Simulation.from_arrays)")
         _choice("boundary", self.boundary, BOUNDARIES)
         _choice("scheme", self.scheme, SCHEMES)
         _choice("precision", self.precision, PRECISIONS)
@@ -204,6 +263,7 @@ class Scene:
         check_count("seed", self.seed)
         check_fits(rhi, box, self.boundary)
         check_room(rhi, box, self.boundary, self.precision)
+        check_scale(box, rlo, vhi, self.precision)
         check_area_fraction(self.expected_area_fraction_of(self.n, box, rlo, rhi), self.n, box)
         object.__setattr__(self, "n", int(self.n))
         object.__setattr__(self, "box", box)

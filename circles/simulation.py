@@ -26,8 +26,9 @@ from . import discrete, event, launch, placement, reductions
 from .backend import current_arch, ensure_init, on_restart, runtime, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
-from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, area_fraction,
-                    check_area_fraction, check_box, check_count, check_dt, check_fits, check_speed)
+from .scene import (BOUNDARIES, MASS_MODELS, MAX_DT, PRECISIONS, SCHEMES, Scene, _choice, area_fraction,
+                    check_area_fraction, check_box, check_count, check_dt, check_fits, check_scale, check_speed)
+from .scene import scalar as _scalar
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
 #: cells, and the clusters a split into parts must keep whole, grow with it; a step cut short
@@ -148,6 +149,10 @@ def _masses(model, radius):
     if not np.all(np.isfinite(mass)) or np.any(mass <= 0):
         bad = mass[~(np.isfinite(mass) & (mass > 0))][0]
         raise ValueError(f"mass {bad} must be finite and > 0")
+    least = float(np.finfo(np.float64).tiny)
+    if np.any(mass < least):
+        raise ValueError(f"mass {mass[mass < least][0]:g} is below {least:g}, the least normal float64 (its "
+                         "inverse overflows): give the masses in a larger unit, as only their ratios matter")
     return mass
 
 
@@ -211,9 +216,10 @@ def real_numbers(name, value):
     return arr.astype(np.float64)
 
 
-def check_circles(pos, vel, radius, precision):
+def check_circles(pos, vel, radius, box, precision):
     """Given circles (`Simulation.from_arrays`, `Simulation.load`): pos and vel (n, 2) and
-    finite, no speed above MAX_SPEED[precision], for n radii that are finite and > 0."""
+    finite, no speed above MAX_SPEED[precision], for n radii that are finite and > 0, and
+    lengths and speeds that the precision squares with room (`scene.check_scale`)."""
     n = radius.shape[0]
     for name, arr in (("pos", pos), ("vel", vel)):
         if arr.shape != (n, 2):
@@ -226,6 +232,7 @@ def check_circles(pos, vel, radius, precision):
     check_speed(float(speeds[fastest]), precision, f"the speed of circle {fastest},")
     if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
         raise ValueError(f"radius {radius[~(np.isfinite(radius) & (radius > 0))][0]} must be finite and > 0")
+    check_scale(box, float(radius.min()), float(speeds[fastest]), precision)
 
 
 def outside_walls(pos, radius, box, slack):
@@ -280,10 +287,10 @@ def default_dt(scheme, radius, vel):
         dt = EVENT_STEP_RADII * float(radius.mean()) / vmax
     else:
         dt = DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
-    if not (0 < dt < math.inf):
+    if not (0 < dt <= MAX_DT):
         raise ValueError(f"the largest speed {vmax:g} and the radii (mean {float(radius.mean()):g}) give a step "
-                         f"dt = {dt:g}, which no clock can count: give dt, or measure lengths and times in "
-                         "other units")
+                         f"dt = {dt:g}, beyond the steps from 0 to {MAX_DT:g} that a run takes: give dt, or measure "
+                         "lengths and times in other units")
     return dt
 
 
@@ -377,6 +384,8 @@ def check_memory(n: int, scheme: str, precision: str, available=None, record_eve
             f"simulate {fix}, or use a machine with more memory")
 
 
+#: The most collisions a circle's counters hold (32-bit integers).
+COUNT_MAX = 2 ** 31 - 1
 #: The arrays of a file that `Simulation.save` writes.
 SAVED_FIELDS = ("pos", "vel", "radius", "mass", "color", "box", "boundary", "scheme", "precision", "dt", "time",
                 "steps", "pair_count", "wall_count", "virial", "wall_impulse")
@@ -406,21 +415,29 @@ def _read_saved(path):
             d = {k: f[k] for k in SAVED_FIELDS}
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:  # a damaged member
             raise refuse(f"numpy cannot read its arrays: {error}") from None
+    # Numbers of the right kind first: numpy casts complex numbers to reals with a warning (the
+    # imaginary part dropped), and strings fail its arithmetic with messages of its own.
+    kinds = {name: "iuf" for name in ("pos", "vel", "radius", "mass", "box", "dt", "time", "virial",
+                                      "wall_impulse")}
+    kinds.update(steps="iu", pair_count="iu", wall_count="iu")
+    for name, kind in kinds.items():
+        if d[name].dtype.kind not in kind:
+            raise refuse(f"its {name} has type {d[name].dtype}, not {'integer' if kind == 'iu' else 'real number'}")
+    if d["radius"].ndim != 1 or d["radius"].shape[0] == 0:
+        raise refuse(f"its radius has shape {d['radius'].shape}, not (n,) for n >= 1 circles")
     n = d["radius"].shape[0]
     shapes = {"radius": (n,), "box": (2,), "boundary": (), "scheme": (), "precision": (), "dt": (), "time": (),
               "steps": (), "pair_count": (n,), "wall_count": (n,), "virial": (n,), "wall_impulse": (n,)}
     for name, shape in shapes.items():
         if d[name].shape != shape:
             raise refuse(f"its {name} has shape {d[name].shape}, not {shape}")
-    numbers = {"box": np.number, "dt": np.number, "time": np.number, "steps": np.integer, "pair_count": np.integer,
-               "wall_count": np.integer, "virial": np.number, "wall_impulse": np.number}
-    for name, kind in numbers.items():
-        if not np.issubdtype(d[name].dtype, kind):
-            raise refuse(f"its {name} has type {d[name].dtype}, not {kind.__name__}")
     for name in ("pair_count", "wall_count", "virial", "wall_impulse"):
         if not np.all(np.isfinite(d[name]) & (d[name] >= 0)):
             raise refuse(f"its {name} holds {d[name][~(np.isfinite(d[name]) & (d[name] >= 0))][0]}, not a "
                          "finite number >= 0")
+    for name in ("pair_count", "wall_count"):  # a circle's counts are 32-bit integers in a run
+        if np.any(d[name] > COUNT_MAX):
+            raise refuse(f"its {name} holds {d[name].max()}, more than the {COUNT_MAX} a run counts for a circle")
     try:
         for name, allowed in (("boundary", BOUNDARIES), ("scheme", SCHEMES), ("precision", PRECISIONS)):
             _choice(name, str(d[name]), allowed)
@@ -428,7 +445,7 @@ def _read_saved(path):
         box = check_box(tuple(float(x) for x in d["box"]))
         check_dt(float(d["dt"]))
         check_count("steps", int(d["steps"]))
-        check_circles(d["pos"], d["vel"], d["radius"], precision)
+        check_circles(d["pos"], d["vel"], d["radius"], box, precision)
         d["color"] = check_colors(d["color"], n)
         masses_for(d["mass"], d["radius"], precision)
         # A saved state lies inside the walls up to the rounding of its places.
@@ -536,13 +553,6 @@ def _whole_steps():
 WORK_COUNTERS = ("rounds", "sweeps", "cut_steps", "parts_run")
 
 
-def _scalar(x):
-    """A 0-d numpy array of numbers (not of bools) as its number; anything else as it is."""
-    if isinstance(x, np.ndarray) and x.ndim == 0 and np.issubdtype(x.dtype, np.number):
-        return x.item()
-    return x
-
-
 def _unpickle(cls, fields, scene, extras):
     """A pickled Simulation (`Simulation.__reduce__`) made again."""
     return cls._from_fields(fields, scene, extras)
@@ -609,7 +619,7 @@ class Simulation:
         if n == 0:
             raise ValueError("n = 0 circles: give at least one")
         check_memory(n, scheme, precision, record_events=record_events)
-        check_circles(pos, vel, radius, precision)
+        check_circles(pos, vel, radius, box, precision)
         mass = masses_for("radius" if mass is None else mass, radius, precision)
         # A place given as the result of arithmetic (0.3 - 0.2 for a radius of 0.1) may cross a
         # wall by its rounding, as a saved one may (`load`).
@@ -1397,7 +1407,8 @@ class Simulation:
         CAPACITY collisions happened."""
         self._live()
         if self._record_cap <= 0:
-            raise RuntimeError("events are recorded only with record_events=CAPACITY > 0")
+            raise RuntimeError("events are recorded only with record_events=CAPACITY > 0: give it to Simulation, "
+                               "Simulation.from_arrays or Simulation.load (a loaded run's log starts at the load)")
         k = int(self._counters.to_numpy()[1])
         if k > self._record_cap:
             raise RuntimeError(f"{k} events happened but record_events={self._record_cap}: "
@@ -1445,18 +1456,18 @@ class Simulation:
         return extras
 
     @classmethod
-    def _from_fields(cls, d, scene=None, extras=None) -> "Simulation":
+    def _from_fields(cls, d, scene=None, extras=None, record_events=0) -> "Simulation":
         """A simulation in the state `_fields` (or a file, `_read_saved`) gives, with `extras`
-        (`_extras`) when given."""
+        (`_extras`) when given, else with a new event log of `record_events` collisions."""
         ensure_init()
         extras = extras or {}
         log = extras.get("log")
-        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]),
-                     record_events=0 if log is None else log[0])
+        capacity = record_events if log is None else log[0]
+        check_memory(d["radius"].shape[0], str(d["scheme"]), str(d["precision"]), record_events=capacity)
         sim = cls.__new__(cls)
         sim.scene = scene
         sim._setup(d["pos"], d["vel"], d["radius"], d["mass"], d["color"], tuple(d["box"]), str(d["boundary"]),
-                   str(d["scheme"]), str(d["precision"]), float(d["dt"]), 0 if log is None else log[0])
+                   str(d["scheme"]), str(d["precision"]), float(d["dt"]), capacity)
         sim._upload(d["pos"], d["vel"], d["pair_count"], d["wall_count"], d["virial"], d["wall_impulse"])
         sim.time = float(d["time"])
         sim.steps = int(d["steps"])
@@ -1502,7 +1513,9 @@ class Simulation:
         if not path.parent.is_dir():
             raise FileNotFoundError(f"cannot save to {path}: the folder {path.parent} does not exist; make it first")
         fields = self._fields()
-        part = path.with_name(f".{path.name}.{os.getpid()}.part")
+        # The temporary name holds at most 100 bytes of the file's (a name may take 255).
+        short = path.name.encode()[:100].decode(errors="ignore")
+        part = path.with_name(f".{short}.{os.getpid()}.part")
         try:
             with open(part, "wb") as f:
                 np.savez(f, **fields)
@@ -1512,11 +1525,17 @@ class Simulation:
         return path
 
     @classmethod
-    def load(cls, path) -> "Simulation":
+    def load(cls, path, *, record_events: int = 0) -> "Simulation":
         """A simulation from a file that `save` wrote: the same state, time and step count, so
         that it goes on as the saved one would have, bit for bit. A file that is not such an
-        archive raises ValueError (a missing one FileNotFoundError)."""
-        sim = cls._from_fields(_read_saved(path))
+        archive raises ValueError (a missing one FileNotFoundError). The event log is not
+        saved: `record_events=CAPACITY` starts a new one, as in `Simulation`."""
+        d = _read_saved(path)
+        try:
+            check_record_events(record_events, str(d["scheme"]))
+        except ValueError as error:
+            raise ValueError(f"{error} (the file {path} holds a run of the {d['scheme']} scheme)") from None
+        sim = cls._from_fields(d, record_events=record_events)
         if sim.scheme == "event":  # its circles never overlap (the discrete scheme's do, by its errors)
             try:
                 sim._check_overlap()

@@ -7,6 +7,7 @@ circles.geometry), so any difference is a race, not round-off.
 Each run is a process of its own (see process_util).
 """
 
+import dataclasses
 import json
 import textwrap
 
@@ -126,6 +127,28 @@ def test_stats_continue_after_load(circles_cpu, tmp_path):
         assert b[key] == pytest.approx(a[key], rel=1e-12), key
 
 
+def test_a_loaded_run_records_its_events_from_the_load(circles_cpu, tmp_path):
+    """The event log is not saved; load(record_events=...) starts one (a loaded simulation
+    could not record before), whose rows are those of the run straight from the load on."""
+    scene = circles_cpu.Scene(n=300, box=(1.0, 1.0), radius=0.012, speed=1.0, seed=33)
+    straight = circles_cpu.Simulation(scene, record_events=100_000)
+    straight.step(10)
+    straight.save(tmp_path / "run.npz")
+    logged = len(straight.events())
+    straight.step(10)
+    resumed = circles_cpu.Simulation.load(tmp_path / "run.npz", record_events=100_000)
+    resumed.step(10)
+    assert logged > 100 and np.array_equal(resumed.events(), straight.events()[logged:])
+    with pytest.raises(RuntimeError, match="give it to Simulation, Simulation.from_arrays or Simulation.load"):
+        circles_cpu.Simulation.load(tmp_path / "run.npz").events()
+    with pytest.raises(ValueError, match="record_events = -1 .*"):
+        circles_cpu.Simulation.load(tmp_path / "run.npz", record_events=-1)
+    discrete = circles_cpu.Simulation(dataclasses.replace(scene, scheme="discrete"))
+    discrete.save(tmp_path / "discrete.npz")
+    with pytest.raises(ValueError, match="only the event scheme logs .* holds a run of the discrete scheme"):
+        circles_cpu.Simulation.load(tmp_path / "discrete.npz", record_events=10)
+
+
 def test_save_writes_the_path_given_and_nothing_half_written(circles_cpu, tmp_path, monkeypatch):
     """save writes exactly the path it is given (numpy's savez would add .npz to it), and a
     save that fails leaves the older file as it was and no partial one beside it."""
@@ -158,6 +181,12 @@ def test_save_writes_the_path_given_and_nothing_half_written(circles_cpu, tmp_pa
     with pytest.raises(FileNotFoundError, match="folder .*missing does not exist"):
         sim.save(tmp_path / "missing" / "run.npz")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["state.bin"]
+    # A name of 250 bytes (up to 255 are allowed) was refused: the temporary name beside it
+    # added the process id and ".part" to the whole of it.
+    long = tmp_path / ("é" * 123 + "s.npz")
+    assert len(long.name.encode()) == 251 and sim.save(long) == long
+    assert np.array_equal(circles_cpu.Simulation.load(long).state().pos, sim.state().pos)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["state.bin", long.name])
 
 
 def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
@@ -186,6 +215,12 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
     np.savez(tmp_path / "steps.npz", **{**fields, "steps": 2.5})
     np.savez(tmp_path / "clock.npz", **{**fields, "time": "abc"})
     np.savez(tmp_path / "masses.npz", **{**fields, "mass": np.where(np.arange(40) == 2, 1e300, fields["mass"])})
+    # Complex numbers were taken with a warning (numpy drops the imaginary part), strings failed
+    # in numpy's arithmetic, no circles in its argmax, and a count past 32 bits wrapped.
+    np.savez(tmp_path / "complex.npz", **{**fields, "pos": fields["pos"] + 0j})
+    np.savez(tmp_path / "words.npz", **{**fields, "vel": fields["vel"].astype(str)})
+    np.savez(tmp_path / "empty.npz", **{**{k: v[:0] if v.ndim else v for k, v in fields.items()}})
+    np.savez(tmp_path / "wraps.npz", **{**fields, "pair_count": np.full(40, 2 ** 33 + 6)})
     for name, why in (("notes.npz", "not an .npz archive"), ("one.npy", "one array"),
                       ("partial.npz", "lacks radius, mass, color, box"), ("shape.npz", "pos has shape"),
                       ("cut.npz", "not an .npz archive"), ("scheme.npz", "scheme 'magic' is unknown"),
@@ -197,8 +232,12 @@ def test_load_refuses_a_file_save_did_not_write(circles_cpu, tmp_path):
                       ("negative.npz", "wall_count holds -5, not a finite number >= 0"),
                       ("color.npz", "color of circle 0, [300, 300, 300], is not three whole numbers"),
                       ("steps.npz", "steps has type float64, not integer"),
-                      ("clock.npz", "time has type <U3, not number"),
-                      ("masses.npz", "circle 2 (mass 1e+300) is")):
+                      ("clock.npz", "time has type <U3, not real number"),
+                      ("masses.npz", "circle 2 (mass 1e+300) is"),
+                      ("complex.npz", "pos has type complex128, not real number"),
+                      ("words.npz", "vel has type <U32, not real number"),
+                      ("empty.npz", "radius has shape (0,), not (n,) for n >= 1 circles"),
+                      ("wraps.npz", "pair_count holds 8589934598, more than the 2147483647 a run counts")):
         with pytest.raises(ValueError, match="not a simulation written by Simulation.save") as refused:
             circles_cpu.Simulation.load(tmp_path / name)
         assert why in str(refused.value) and name in str(refused.value), str(refused.value)

@@ -245,8 +245,10 @@ def test_masses_of_any_size_within_the_ratio_the_precision_carries(circles_cpu):
     refused(from_arrays(circles_cpu, mass=np.array([1.0, 1e37, 1.0, 1.0]), precision="f32"),
             r"circle 1 \(mass 1e\+37\) is 1e\+37 times as heavy as circle 0", r"1e\+36")
     refused(from_arrays(circles_cpu, mass=np.array([1e-200, 1.0, 1e200, 1.0])), r"1e\+400|inf", r"1e\+300")
-    refused(from_arrays(circles_cpu, radius=np.array([0.05, 1e-20, 0.05, 0.05]), mass="area", precision="f32"),
-            "times as heavy as circle 1", r"1e\+36")
+    # Radii 1e18 apart, within f32's lengths (a box 1e4 wide, the least radius 4.8e-16).
+    p, v, r = arrays()
+    refused(from_arrays(circles_cpu, pos=p * 1e4, vel=v * 10, radius=np.array([500, 4.8e-16, 500, 500]),
+                        mass="area", box=(1e4, 1e4), precision="f32"), "times as heavy as circle 1", r"1e\+36")
 
 
 def test_from_arrays_takes_real_numbers_only(circles_cpu):
@@ -328,15 +330,16 @@ def test_a_scene_too_close_to_jamming_names_the_fraction_that_places(circles_cpu
     assert placed.stats()["max_overlap"] == 0
 
 
-@pytest.mark.parametrize("length", [1e-300, 1e300])
-def test_boxes_of_any_finite_size_have_an_area_fraction(circles_cpu, length):
+@pytest.mark.parametrize("length, simulated", [(1e-300, 1e-140), (1e300, 1e150)])
+def test_boxes_of_any_finite_size_have_an_area_fraction(circles_cpu, length, simulated):
     """The area fraction is pi sum (r / W)(r / H): in a box of 1e-300 the squares of lengths
     underflowed to 0 (0 / 0 raised ZeroDivisionError), in one of 1e300 they overflowed. One
     circle of a quarter of the box's side fills pi / 16 of it, in a Scene's check as in
-    from_arrays'."""
+    from_arrays' (at lengths the simulation takes, `scene.check_scale`)."""
     from circles.scene import area_fraction
 
     assert area_fraction([0.25 * length], (length, length)) == pytest.approx(math.pi / 16, rel=1e-15)
+    length = simulated
     assert circles_cpu.Scene(n=3, box=(length, length), radius=0.25 * length).area_fraction == pytest.approx(
         3 * math.pi / 16, rel=1e-15)
     sim = circles_cpu.Simulation.from_arrays([[0.5 * length, 0.5 * length]], [[0.0, 0.0]], [0.25 * length],
@@ -372,3 +375,44 @@ def test_overlap_two_cells_apart_is_refused(circles_cpu):
     with pytest.raises(ValueError, match="overlap"):
         circles_cpu.Simulation.from_arrays([[0.166, 0.5], [0.336, 0.5]], [[0, 0], [0, 0]], [r, r], box=(1.0, 1.0),
                                            scheme="discrete", dt=1e-3)
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_lengths_and_speeds_beyond_what_the_precision_squares_are_refused(circles_cpu, precision):
+    """A box 1e25 wide in f32 overflowed every squared distance (its circles passed through each
+    other, 0 collisions), and a contact distance and speed near 1e-17 in f32 underflowed (Taichi
+    flushes to 0): such scenes are refused with the bound and the fix, and scenes at the bounds
+    run and collide."""
+    from circles.scene import MAX_LENGTH, MAX_SPEED, MIN_LENGTH
+
+    lo, hi = MIN_LENGTH[precision], MAX_LENGTH[precision]
+    refused(scene(circles_cpu, n=10, box=(4 * hi, 4 * hi), radius=hi / 20, speed=(0.0, 0.1), precision=precision),
+            "box side .* is above", re.escape(f"{hi:g}"))
+    refused(scene(circles_cpu, n=10, box=(100 * lo, 100 * lo), radius=lo / 2, speed=(0.0, 1e5), precision=precision),
+            "radius .* is below", re.escape(f"{lo:g}"))
+    fast = MAX_SPEED[precision] / 2  # allowed alone
+    refused(scene(circles_cpu, n=10, box=(1e3, 1e3), radius=0.1, speed=(0.0, fast), precision=precision),
+            "times the largest speed .* is .*, above", re.escape(f"{hi:g}"))
+    refused(scene(circles_cpu, n=10, box=(4.0, 4.0), radius=0.1, speed=(0.0, lo), precision=precision),
+            "times the largest speed .* is .*, below", re.escape(f"{lo:g}"))
+    p, v, r = arrays()
+    refused(from_arrays(circles_cpu, pos=p * 8 * lo, vel=v, radius=r * 8 * lo, box=(8 * lo, 8 * lo),
+                        precision=precision), "is below", re.escape(f"{lo:g}"))
+    refused(from_arrays(circles_cpu, mass=np.array([1.0, 1e-310, 1.0, 1.0])), "mass 1e-310 is below 2.22507e-308")
+    # Times within a step stay below geometry.NEVER (1e30): a pair 1e35 apart at speed 1, with
+    # the default step of 3e33, collided without end.
+    refused(scene(circles_cpu, n=10, box=(1e18, 1e18), radius=1e16, speed=1e-12, precision=precision),
+            "give a step dt = 3e\\+27, beyond the steps from 0 to 1e\\+27", "measure lengths and times")
+    refused(scene(circles_cpu, dt=1e28, precision=precision), "dt = 1e\\+28 is above 1e\\+27", "shorter dt")
+    # At the bounds: two circles meet head on, in a box of the least lengths and in one of the
+    # largest (speeds such that their products with the lengths stay within the bounds).
+    # Steps are at most MAX_DT (1e27), which bounds f64's lengths at speeds within the bounds
+    # before MAX_LENGTH does: 1e80 wide at a speed of 1e60.
+    for unit, speed in ((20 * lo, 1.0), (hi / 8, 1.0) if precision == "f32" else (1e80, 1e60)):
+        pos = np.array([[0.25, 0.5], [0.75, 0.5]]) * unit
+        sim = circles_cpu.Simulation.from_arrays(pos, np.array([[speed, 0.0], [-speed, 0.0]]), np.full(2, 0.1 * unit),
+                                                 box=(unit, unit), precision=precision)
+        sim.advance(0.2 * unit / speed)
+        assert sim.stats()["pair_collisions"] == 1, unit
+        assert sim.state().vel[0, 0] == pytest.approx(-speed, rel=1e-6)
+
