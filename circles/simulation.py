@@ -572,9 +572,17 @@ def _release_all():
 
 
 class Simulation:
-    """Circles in a box, advanced in fixed steps of simulated time."""
+    """Circles in a box, advanced in fixed steps of simulated time.
+
+    Made from a `Scene` (circles drawn and placed at random from its seed), from given circles
+    (`from_arrays`), or from a file that `save` wrote (`load`). `advance(duration)` and
+    `step(k)` move it; `state()`, `stats()`, `events()` and `render(width, height)` read it.
+    """
 
     def __init__(self, scene: Scene, *, record_events: int = 0):
+        """The circles of `scene`: radii, speeds, directions and colours drawn from its seed,
+        places at random without overlap. With the event scheme, `record_events=CAPACITY` > 0
+        keeps a log of up to CAPACITY collisions (`events`)."""
         if not isinstance(scene, Scene):
             raise TypeError(f"Simulation takes a circles.Scene, not {type(scene).__name__}")
         ensure_init()
