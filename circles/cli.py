@@ -26,6 +26,7 @@ second at once; neither cuts short the writing of a frame or the finishing of th
 
 import argparse
 import contextlib
+import importlib
 import math
 import os
 import re
@@ -280,10 +281,11 @@ def _circle_list(path, fields, args):
         raise UsageError(f"{path}: {error}") from None
 
 
-def _prepare(argv):
+def _prepare(argv, made):
     """Everything that can fail on bad input, before any simulating: (scene, options).
 
-    The scene is a `Scene`, or a `CircleList` for a file that lists its circles.
+    The scene is a `Scene`, or a `CircleList` for a file that lists its circles. The folders
+    made for the output are listed in `made`.
     """
     parser = _build_parser()
     if not argv:
@@ -308,7 +310,7 @@ def _prepare(argv):
             raise UsageError(f"{where}{error}") from None
     options = _run_options(file_run, args)
     try:
-        options["out"] = check_writable(options["out"], options["fps"], options["size"])
+        options["out"] = check_writable(options["out"], options["fps"], options["size"], made)
     except ValueError as error:
         raise UsageError(str(error)) from None
     return scene, options
@@ -475,16 +477,49 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
         ("wrote", f"{writer.path} ({frames_text(writer.frames)} at {writer.fps:g} fps)"
                   if writer.frames else "nothing: stopped before the first frame was written"),
     ]
-    for name, text in lines:
-        print(f"{name:<11} {text}")
+    try:
+        for name, text in lines:
+            print(f"{name:<11} {text}")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # The reader of the summary left (`circles run ... | head -1`): its choice, not a
+        # failure. Output still buffered is dropped, so that the exit does not fail on it.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except OSError as error:
+        raise SummaryError(f"the run is done and {writer.path} is complete, but its summary could not be "
+                           f"printed: {error}") from None
+
+
+class SummaryError(OSError):
+    """The run is done and its file complete, but the summary could not be printed."""
+
+
+def _import_the_engine():
+    """Import the simulation, the canvas and the video writer, with a Ctrl-C meanwhile held
+    until the imports end; True when one came. (Taichi's decorators, run by the imports, catch
+    every exception in a bare except: a KeyboardInterrupt raised there was lost, or left a
+    half-imported module.)"""
+    presses = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: presses.append(signum))
+    try:
+        for name in ("simulation", "canvas", "video"):
+            importlib.import_module(f".{name}", __package__)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return bool(presses)
 
 
 def main(argv=None):
     """Entry point of the ``circles`` command; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    made = []  # folders made for the output, taken away again if the run stops before writing
     try:
-        scene, options = _prepare(argv)
-        return _run(scene, options)
+        if _import_the_engine():
+            raise KeyboardInterrupt
+        scene, options = _prepare(argv, made)
+        status = _run(scene, options)
+        made.clear()
+        return status
     except UsageError as error:
         print(f"circles: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -493,11 +528,18 @@ def main(argv=None):
     except KeyboardInterrupt:  # before the frames began (placement): nothing written yet
         print("circles: stopped by Ctrl-C", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SummaryError as error:
+        print(f"circles: {error}", file=sys.stderr)
+        return EXIT_FAILED
     except (FloatingPointError, RuntimeError, OSError, ValueError) as error:
         # A broken state, a clock that cannot move, an encoder that quit, a full disk: the
         # frames so far are kept. (Bad input is a UsageError, raised before the run.)
         print(f"circles: the run failed: {error}", file=sys.stderr)
         return EXIT_FAILED
+    finally:
+        if made:  # stopped before the first frame: the folders made for it go
+            from .video import remove_made
+            remove_made(made)
 
 
 if __name__ == "__main__":

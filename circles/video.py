@@ -76,14 +76,6 @@ class WriteError(OSError):
     line, says what failed, why, and what was kept."""
 
 
-#: Suffixes of files that are not a format written here: a path that ends in one is a file
-#: asked for by mistake (``frames.png``, ``run.avi``), not a folder of PNG frames, unless
-#: that folder already exists.
-NOT_WRITTEN = frozenset(
-    ".png .apng .jpg .jpeg .webp .bmp .tif .tiff .avi .mov .mkv .webm .m4v .mpg .mpeg .wmv .flv .ogv "
-    ".txt .csv .json .npy .npz .pdf .svg .zip".split())
-
-
 def output_kind(path):
     """"mp4", "gif" or "png" (a folder of PNG frames), from the path's suffix."""
     suffix = Path(path).suffix.lower()
@@ -144,7 +136,8 @@ def check_mp4_size(width, height):
             f"{(width + 128) * (height + 128)}: use --size {fit_w}x{fit_h} or smaller, or write "
             f"a .gif or PNG frames")
     if width % 2 or height % 2:
-        sizes = [f"{width - width % 2}x{height - height % 2}"]
+        down_w, down_h = width - width % 2, height - height % 2
+        sizes = [f"{down_w}x{down_h}"] if down_w and down_h else []  # a side of 1 has no even size below
         up_w, up_h = width + width % 2, height + height % 2
         if max(up_w, up_h) <= MAX_IMAGE_SIDE and _mp4_size_fits(up_w, up_h):
             sizes.append(f"{up_w}x{up_h}")
@@ -154,12 +147,14 @@ def check_mp4_size(width, height):
             f".gif or PNG frames, which take any size")
 
 
-def check_writable(path, fps=None, size=None):
+def check_writable(path, fps=None, size=None, made=None):
     """Raise ``OutputError`` unless frames at ``fps`` of ``size`` (width, height) pixels can
     be written to ``path``.
 
-    Makes the missing parent folders (or, for PNG frames, the folder itself); leaves no
-    other trace. Call it before simulating so that a bad path fails at once.
+    Makes the missing parent folders (or, for PNG frames, the folder itself), and lists them
+    in ``made`` (deepest last) when it is given, so that a caller that stops before writing
+    can take them away (`remove_made`); leaves no other trace. Call it before simulating so
+    that a bad path fails at once.
     """
     path = Path(path)
     kind = output_kind(path)
@@ -167,10 +162,12 @@ def check_writable(path, fps=None, size=None):
         check_fps(kind, fps)
     if kind == "mp4" and size is not None:
         check_mp4_size(*size)
-    suffix = path.suffix.lower()
-    if kind == "png" and suffix in NOT_WRITTEN and not path.is_dir():
+    suffix = path.suffix
+    # A path with another suffix is a file asked for by mistake (frames.png, run.avi, or
+    # "x.mp4 " with a space), not a folder of PNG frames, unless that folder exists.
+    if kind == "png" and suffix and not path.is_dir():
         raise OutputError(
-            f"cannot write {path}: a {suffix} file is not an output format; write an .mp4, a .gif, "
+            f"cannot write {path}: a {suffix!r} file is not an output format; write an .mp4, a .gif, "
             f"or PNG frames into a folder (a path without a suffix, such as {path.with_suffix('')})")
     if kind == "mp4":
         _ffmpeg_executable()
@@ -179,8 +176,11 @@ def check_writable(path, fps=None, size=None):
         raise OutputError(f"cannot write {path}: it is a folder")
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"cannot write {path}: {folder} is a file, not a folder")
+    missing = [f for f in [folder, *folder.parents] if not f.exists()][::-1]
     try:
         folder.mkdir(parents=True, exist_ok=True)
+        if made is not None:
+            made.extend(missing)
         if kind == "png":
             with tempfile.NamedTemporaryFile(dir=folder, prefix=".circles-check-"):
                 pass
@@ -194,6 +194,17 @@ def check_writable(path, fps=None, size=None):
         reason = error.strerror or str(error)
         raise OutputError(f"cannot write {path}: {reason}") from None
     return path
+
+
+def remove_made(made):
+    """Remove the folders `check_writable` made (listed in `made`), deepest first, each only
+    if it is still empty."""
+    for folder in reversed(made):
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
+    made.clear()
 
 
 def _ffmpeg_executable():

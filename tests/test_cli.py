@@ -4,6 +4,7 @@ A run of duration T at F frames per second writes ceil(T * F) frames: t = 0 is t
 t = T is simulated but not drawn (see circles.cli).
 """
 
+import math
 import os
 import signal
 import subprocess
@@ -121,6 +122,7 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     (["run", "--out", "run.mp4", "--fps", "2e6", "--duration", "1e-6"],
      ["MP4", "2e+06", "1000000", "--fps"]),
     (["run", "--out", "run.mp4", "--size", "65x37"], ["MP4", "even", "65x37", "64x36 or 66x38", ".gif"]),
+    (["run", "--out", "run.mp4", "--size", "1x1"], ["MP4", "even", "1x1", "use --size 2x2, or"]),  # not 0x0
     (["run", "--out", "run.mp4", "--size", "16384x16384"], ["MP4", "16384x16384", "2**28", "--size"]),
     # A mistyped duration: 3e13 frames would fill the disk, and listing them the memory.
     (["run", "--duration", "1e12"], ["1e+12", "3e+13 frames", "1000000", "--duration", "--fps"]),
@@ -475,3 +477,58 @@ def test_cli_seed_flag_places_with_that_seed(tmp_path, circles_cpu):
     assert done.returncode == 0, done.stderr
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(4.0, 3.0), radius=0.1, speed=(1.0, 2.0), seed=7))
     assert np.array_equal(iio.imread(tmp_path / "frames" / "frame_00000.png"), sim.render(80, 60))
+
+
+EARLY_CTRL_C = """
+import builtins, os, signal, sys
+import circles.cli as cli
+assert "taichi" not in sys.modules  # importing the command line loads no kernels
+real_import = builtins.__import__
+sent = []
+
+def importing(name, *args, **kwargs):
+    # Ctrl-C as Taichi starts to load, before a frame: it was lost in Taichi's decorators
+    # (the run went on to its end) or raised a traceback.
+    if name == "taichi" and not sent:
+        sent.append(1)
+        os.kill(os.getpid(), signal.SIGINT)
+    return real_import(name, *args, **kwargs)
+
+builtins.__import__ = importing
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_while_the_engine_loads_stops_at_once_and_leaves_nothing(tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([sys.executable, "-c", EARLY_CTRL_C, "run", *SMALL, "--duration", "2", "--fps", "10",
+                             "--out", "new/run.gif"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 130, result.stderr
+    assert result.stderr.strip() == "circles: stopped by Ctrl-C" and result.stdout == ""
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_refusal_after_the_output_check_leaves_no_folders(tmp_path):
+    """The output's folders are made when it is checked, before the scene is placed; a scene
+    that placement refuses (here too near jamming to place) exits 2 and takes them away."""
+    radius = (0.88 * 16 * 9 / (2000 * math.pi)) ** 0.5  # area fraction 0.88: no lattice of 2000 fits
+    result = run_cli(["run", "--n", "2000", "--box", "16", "9", "--radius", str(radius), "--scheme", "discrete",
+                      "--arch", "cpu", "--out", "deep/er/run.gif"], tmp_path)
+    assert result.returncode == 2 and "jamming" in result.stderr, result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_summary_that_cannot_be_printed_is_said_so_and_the_file_is_whole(tmp_path):
+    """With standard output on a full device, the run itself succeeded: the message said the
+    run failed, as for a full disk under the video."""
+    with open("/dev/full", "w") as full:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        result = subprocess.run([sys.executable, "-m", "circles.cli", "run", *SMALL, "--duration", "0.5", "--fps",
+                                 "10", "--out", "run.gif"], cwd=tmp_path, env=env, stdout=full, stderr=subprocess.PIPE,
+                                text=True, timeout=120)
+    assert result.returncode == 1
+    assert result.stderr.strip().endswith("run.gif is complete, but its summary could not be printed: [Errno 28] "
+                                          "No space left on device"), result.stderr
+    assert iio.imread(tmp_path / "run.gif", index=None).shape[0] == 5
+

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from circles import video
-from circles.video import FrameWriter, OutputError, WriteError, check_writable, output_kind
+from circles.video import FrameWriter, OutputError, WriteError, check_writable, output_kind, remove_made
 
 FPS = 10
 
@@ -298,11 +298,12 @@ def test_unwritable_path_is_refused(tmp_path):
         check_writable(tmp_path / "taken.mp4", FPS)
 
 
-@pytest.mark.parametrize("name", ["frames.png", "run.AVI", "notes.txt"])
+@pytest.mark.parametrize("name", ["frames.png", "run.AVI", "notes.txt", "clip.3gp", "out.y4m", "x.mp4 ", "run.v2"])
 def test_a_file_suffix_of_no_output_format_is_refused(tmp_path, name):
-    """A path that names a file of another format is a mistake, not a folder of PNG frames:
-    refused before anything is made, with the formats to use; an existing folder of that
-    name still takes PNG frames."""
+    """A path with a suffix other than .mp4 and .gif names a file, by mistake, not a folder of
+    PNG frames: refused before anything is made, with the formats to use (only a fixed list
+    of suffixes was, and clip.3gp, out.y4m or "x.mp4 " became folders of PNG frames); an
+    existing folder of that name still takes PNG frames."""
     path = tmp_path / "new" / name
     with pytest.raises(OutputError, match=r"not an output format; write an \.mp4, a \.gif, or PNG frames"):
         check_writable(path, FPS)
@@ -310,14 +311,17 @@ def test_a_file_suffix_of_no_output_format_is_refused(tmp_path, name):
     path.mkdir(parents=True)
     assert check_writable(path, FPS) == path
     assert output_kind(path) == "png"
-    assert output_kind(tmp_path / "run.v2") == "png"  # a folder's name may hold a dot
-    check_writable(tmp_path / "run.v2", FPS)
 
 
 def test_check_makes_folders_and_leaves_no_file(tmp_path):
     path = tmp_path / "new" / "deeper" / "run.gif"
-    check_writable(path, FPS)
+    made = []
+    check_writable(path, FPS, made=made)
     assert path.parent.is_dir() and not path.exists()
+    assert made == [tmp_path / "new", tmp_path / "new" / "deeper"]
+    (tmp_path / "new" / "kept").mkdir()  # a folder that is no longer empty stays
+    remove_made(made)
+    assert sorted(p.name for p in (tmp_path / "new").iterdir()) == ["kept"] and made == []
 
 
 def test_gif_frame_rate_is_limited(tmp_path):
