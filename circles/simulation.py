@@ -169,7 +169,11 @@ def check_mass_ratio(mass, precision):
     heavy, light = int(np.argmax(mass)), int(np.argmin(mass))
     ratio = float(mass[heavy]) / float(mass[light])
     if not ratio <= MAX_MASS_RATIO[precision]:
-        raise ValueError(f"circle {heavy} (mass {mass[heavy]:g}) is {ratio:.3g} times as heavy as circle {light} "
+        shown = f"{ratio:.3g}"
+        if not math.isfinite(ratio):  # beyond float64 (1e200 over 1e-200): shown from its logarithm
+            exponent = math.log10(float(mass[heavy])) - math.log10(float(mass[light]))
+            shown = f"{10 ** (exponent % 1):.3g}e+{math.floor(exponent)}"
+        raise ValueError(f"circle {heavy} (mass {mass[heavy]:g}) is {shown} times as heavy as circle {light} "
                          f"(mass {mass[light]:g}), more than the {MAX_MASS_RATIO[precision]:g} that {precision} "
                          "arithmetic carries: bring the masses closer"
                          + (", or use precision 'f64'" if precision == "f32" else ""))

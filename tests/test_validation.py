@@ -244,7 +244,7 @@ def test_masses_of_any_size_within_the_ratio_the_precision_carries(circles_cpu):
             assert t[key] == pytest.approx(t1[key] * unit, rel=1e-12), key
     refused(from_arrays(circles_cpu, mass=np.array([1.0, 1e37, 1.0, 1.0]), precision="f32"),
             r"circle 1 \(mass 1e\+37\) is 1e\+37 times as heavy as circle 0", r"1e\+36")
-    refused(from_arrays(circles_cpu, mass=np.array([1e-200, 1.0, 1e200, 1.0])), r"1e\+400|inf", r"1e\+300")
+    refused(from_arrays(circles_cpu, mass=np.array([1e-200, 1.0, 1e200, 1.0])), r"is 1e\+400 times", r"1e\+300")
     # Radii 1e18 apart, within f32's lengths (a box 1e4 wide, the least radius 4.8e-16).
     p, v, r = arrays()
     refused(from_arrays(circles_cpu, pos=p * 1e4, vel=v * 10, radius=np.array([500, 4.8e-16, 500, 500]),
