@@ -213,11 +213,25 @@ def _positive(name, value):
 
 
 def _run_options(file_run, args):
+    """The run's options: flags over the scene file's [run] table over RUN_DEFAULTS. A value
+    from the file that is refused is named with the file."""
     options = {**RUN_DEFAULTS, **file_run}
+    from_file = set()
     for key in RUN_DEFAULTS:
         value = getattr(args, key)
         if value is not None:
             options[key] = value
+        elif key in file_run:
+            from_file.add(key)
+    try:
+        return _checked_run_options(options)
+    except UsageError as error:
+        if str(error).split(" ", 1)[0].lstrip("-") in from_file:  # the messages start with the key
+            raise UsageError(f"{args.scene}: [run] {error}") from None
+        raise
+
+
+def _checked_run_options(options):
     from .backend import ARCHES
     from .canvas import COLOR_MODES
     options["duration"] = _positive("duration", options["duration"])

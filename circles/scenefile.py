@@ -225,6 +225,9 @@ def _check_inside(pos, radius, box, boundary, slack):
     if outside.any():
         i = int(np.flatnonzero(outside)[0])
         r = float(radius[i])
+        if 2 * r > min(w, h):  # no place inside: the box, not the place, is the fix
+            raise ValueError(f"{_circle_name(i)}: radius = {r!r} is too large for the box {w} x {h} (diameter "
+                             f"{2 * r:.6g} > side {min(w, h)}): use a smaller circle or a bigger box")
         raise ValueError(f"{_circle_name(i)}: pos = {pos[i].tolist()!r} with radius = {r!r} is "
                          f"not inside the walls [0, {w}] x [0, {h}]: move it to x in "
                          f"[{r:.6g}, {w - r:.6g}] and y in [{r:.6g}, {h - r:.6g}]")

@@ -532,3 +532,20 @@ def test_a_summary_that_cannot_be_printed_is_said_so_and_the_file_is_whole(tmp_p
                                           "No space left on device"), result.stderr
     assert iio.imread(tmp_path / "run.gif", index=None).shape[0] == 5
 
+
+
+def test_refused_values_of_a_scene_file_name_the_file(tmp_path, capsys, monkeypatch):
+    """A [run] value from the file is refused with the file's name (a flag's without it), and a
+    listed circle wider than the box is told to be smaller, not moved to an empty range of
+    places (y in [0.5, 0.4])."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "run.toml").write_text('n = 10\nradius = 0.1\n[run]\nfps = "30"\n')
+    (tmp_path / "wide.toml").write_text("box = [4.0, 0.9]\n[[circle]]\npos = [2.0, 0.45]\nvel = [1.0, 0.0]\n"
+                                        "radius = 0.5\n")
+    for args, said in ((["run", "run.toml"], "run.toml: [run] fps '30' must be a positive number"),
+                       (["run", "run.toml", "--duration", "-1"], "error: duration -1.0 must be a positive number"),
+                       (["run", "wide.toml"], "radius = 0.5 is too large for the box 4.0 x 0.9 (diameter 1 > "
+                                              "side 0.9): use a smaller circle or a bigger box")):
+        assert cli.main(args) == 2
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1, err
