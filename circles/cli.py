@@ -259,6 +259,20 @@ def _checked_run_options(options):
 MOST_FRAMES = 1_000_000
 
 
+#: Steps a run may take at most: over a day at 10 microseconds a step, the least a step costs
+#: on a CPU. More is a mistyped --dt (or speeds far beyond the radii), and would never end.
+MOST_STEPS = 10 ** 10
+
+
+def check_step_count(duration, dt):
+    """Refuse a run of more than MOST_STEPS steps of dt (the scene's, once it is made)."""
+    steps = duration / dt
+    if steps > MOST_STEPS:
+        raise UsageError(f"duration {duration:g} s in steps of dt = {dt:.3g} s makes {steps:.3g} steps, more than "
+                         f"the {MOST_STEPS:.0e} a run may take: give a longer --dt, or a shorter --duration (the "
+                         "default dt comes from the radii over the largest speed)")
+
+
 def frame_count(duration, fps):
     """How many frames a run makes: one at each k / fps with k / fps < duration (a last,
     partial interval gets one), at least one."""
@@ -395,6 +409,7 @@ def _run(scene, options):
         # Placement can still refuse a scene that passed the checks of Scene, and
         # from_arrays checks what a CircleList leaves to it (such as the area fraction).
         sim = _simulation(scene)
+        check_step_count(options["duration"], sim.dt)
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
     setup_s = time.perf_counter() - started

@@ -127,6 +127,9 @@ def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
     # A mistyped duration: 3e13 frames would fill the disk, and listing them the memory.
     (["run", "--duration", "1e12"], ["1e+12", "3e+13 frames", "1000000", "--duration", "--fps"]),
     (["run", "--duration", "1e300", "--fps", "1e300"], ["1e+300", "more frames than a float holds"]),
+    # 5e30 steps would never end (checked once the scene is made, its default dt known).
+    (["run", "--n", "20", "--dt", "1e-30", "--out", "q.gif"], ["5e+30 steps", "1e+10", "--dt", "--duration"]),
+    (["run", "--n", "20", "--speed", "1e150", "--out", "q.gif"], ["steps", "1e+10", "--dt"]),
 ])
 def test_bad_input_exits_2_with_one_line(args, words, capsys, monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
