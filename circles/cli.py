@@ -15,7 +15,8 @@ of ``duration`` seconds gives ``ceil(duration * fps)`` frames showing t = 0, 1/f
 each shown for 1/fps, so the video lasts ``duration`` seconds (up to the next whole frame,
 ``ceil(duration * fps) / fps``) and shows the same motion on every machine. The
 simulation runs the whole ``duration``; the state at the end is summarised, not drawn. A run
-makes at most MOST_FRAMES frames (refused before any work beyond that).
+makes at most MOST_FRAMES frames and MOST_STEPS steps (refused before any simulating beyond
+those).
 
 Exit status: 0 done; 2 bad input (one line on stderr, before any simulating); 1 the run
 failed (one line on stderr; the frames written so far are kept readable, except in an MP4
