@@ -990,23 +990,23 @@ class Simulation:
             raise ValueError(f"duration {duration!r} must be a finite number of simulated seconds >= 0")
         duration = float(duration)
         self._check_clock_counts(duration, "duration")
-        end = self.time + duration
+        end = self._time + duration
         with _whole_steps() as steps:
-            while self.time < end:
-                left = end - self.time
-                h = min(self.dt, left)
+            while self._time < end:
+                left = end - self._time
+                h = min(self._dt, left)
                 if h < left:
                     self._check_clock_counts(h, "dt")
                 done = self._step(h)
                 # The last piece ends at `end` itself: time + (end - time) can round a unit
                 # below it, which would cost a step of a unit's length more.
-                before = self.time
-                self.time = end if done == left else self.time + done
+                before = self._time
+                self._time = end if done == left else self._time + done
                 self.steps += 1
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
                 steps.between_steps()
-                if self.time == before:
+                if self._time == before:
                     # A step cut short (a periodic box's limit, or a collision that would outrun
                     # the grid) below the clock's resolution: the next would be cut the same way.
                     raise ValueError(f"a step was cut to {done:g} s, below the resolution of the simulated clock "
@@ -1014,7 +1014,7 @@ class Simulation:
                                      f"the steps (the circles are at time {self.time:g} to within it); start the "
                                      "clock again with sim.time = 0, or, in a periodic box, lower the speeds or "
                                      "enlarge the box")
-            self.time = end
+            self._time = end
         self._check_finite()
         return self
 
@@ -1024,13 +1024,14 @@ class Simulation:
         k = _scalar(k)
         if isinstance(k, bool) or not isinstance(k, Real) or not math.isfinite(k) or int(k) != k or k < 0:
             raise ValueError(f"k = {k!r} must be a whole number of steps >= 0")
+        dt = self._dt
         with _whole_steps() as steps:
             for _ in range(int(k)):
-                self._check_clock_counts(self.dt, "dt")
+                self._check_clock_counts(dt, "dt")
                 done = 0.0
-                while done < self.dt:
-                    done += self._step(self.dt - done)
-                self.time += self.dt
+                while done < dt:
+                    done += self._step(dt - done)
+                self._time += dt
                 self.steps += 1
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
@@ -1043,7 +1044,8 @@ class Simulation:
         now, would count off by more than CLOCK_TOLERANCE of h: the circles would move by h
         and the clock by another length (at time 1e14 float64 counts in units of 1/64, so a
         step of 0.01 counted as 0.015625)."""
-        moved = (self.time + h) - self.time
+        time = self._time
+        moved = (time + h) - time
         if h > 0 and abs(moved - h) > CLOCK_TOLERANCE * h:
             unit = float(np.spacing(self.time + h))
             raise ValueError(f"{what} = {h:g} is too short for the simulated clock at time {self.time:g}, which "
@@ -1123,7 +1125,7 @@ class Simulation:
             self.sweeps += sweeps
             executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
                                      self._ev_p, self._d1, self._dirty, self._moved, self.pair_count, self.wall_count,
-                                     self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self.time,
+                                     self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self._time,
                                      self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
                                      periodic, record)
             self.rounds += 1
@@ -1190,7 +1192,7 @@ class Simulation:
                                    self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
                                    self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                    self.wall_impulse,
-                                   *g, w, hgt, h, vlim, self.time, self._counters, self._log_t, self._log_i,
+                                   *g, w, hgt, h, vlim, self._time, self._counters, self._log_t, self._log_i,
                                    self._log_j, self._speed_out, *levels, event.most_events(self.n), real,
                                    periodic, record, two,
                                    self._serial, at_start)
@@ -1262,7 +1264,7 @@ class Simulation:
                                   self.wall_impulse, self._touched, self._dirty_w, self._saved,
                                   *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
                                   self._part_result, *cell_args, rows_per, parts, w, hgt, end, min(t1, end), vlim,
-                                  self.time, self._mark, first, self._counters, self._log_t, self._log_i,
+                                  self._time, self._mark, first, self._counters, self._log_t, self._log_i,
                                   self._log_j, self._real, record, periodic)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]
