@@ -527,3 +527,20 @@ def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circ
     with pytest.raises(ValueError, match=r"a step was cut to 0.5\d* s, below the resolution of the simulated clock"):
         torus.advance(100.0)
     assert torus.steps == 1 and torus.time == 1e16
+
+
+@pytest.mark.parametrize("mass", [[1.0, 100.0], "equal"])
+def test_a_pair_approaching_in_contact_at_the_start_collides_and_the_run_goes_on(circles_cpu, mass):
+    """Circles given in contact and approaching collide at t = 0. When the collision makes a
+    circle faster than the step's grid allows, the step is cut at its start; advance took
+    that for a clock that cannot move and raised, though the collision was done and the next
+    step (made for the new speeds) goes on."""
+    # Equal masses: the circle at rest moving across the line of centres leaves at speed 1.41.
+    across = 0.0 if mass != "equal" else 1.0
+    pos, vel = np.array([[1.0, 1.0], [1.25, 1.0]]), np.array([[0.0, across], [-1.0, 0.0]])
+    sim = circles_cpu.Simulation.from_arrays(pos, vel, 0.125, mass=mass, box=(4.0, 2.0), record_events=10)
+    sim.advance(0.01)
+    m0, m1 = (1.0, 100.0) if mass != "equal" else (1.0, 1.0)
+    # 1-D elastic collision: the light circle at rest is hit by the other at speed -1.
+    assert sim.state().vel[:, 0] == pytest.approx([-2 * m1 / (m0 + m1), -(m1 - m0) / (m0 + m1)], abs=1e-12)
+    assert sim.time == 0.01 and sim.events().tolist() == [[0.0, 0.0, 1.0]]
