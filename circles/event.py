@@ -53,6 +53,11 @@ from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits,
 
 #: Bound sweeps per launch (even: the two flag arrays swap roles each sweep).
 SWEEPS_PER_LAUNCH = 4
+#: The keys a bound carries besides an event's (`_bound_sweep`): below every event's, for a
+#: bound that no event at its time may pass; n + BOUND_KEY_NONE, above every event's (no event
+#: has more than n + 8), for a bound set by no event.
+BOUND_KEY_LOW = -1
+BOUND_KEY_NONE = 9
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -535,38 +540,52 @@ def mark_neighbours_dirty(i, dirty: ti.template(), cell_of: ti.template(), cell_
 
 
 @ti.func
-def _seed_bounds(ev_t: ti.template(), d: ti.template(), active: ti.template(), cell_of: ti.template(),
-                 cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, t_end,
-                 real: ti.template(), periodic: ti.template()):
-    """Start the bound sweeps of a round: D = t_end everywhere, and active only near events.
+def _seed_bounds(ev_t: ti.template(), d: ti.template(), d_key: ti.template(), active: ti.template(),
+                 cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
+                 t_end, real: ti.template(), periodic: ti.template()):
+    """Start the bound sweeps of a round: D = t_end everywhere, with a key above every event's
+    (`BOUND_KEY_NONE`), and active only near events.
 
-    With every D at t_end, a neighbour l can lower D_k only if its own event comes before
-    t_end (min(t_l, D_l) < D_k), so the first sweep needs to visit only the circles next to
-    a circle with an event in the step; circles whose D falls later activate their own
+    With every D at t_end, a neighbour l can lower D_k only if its own event comes by t_end
+    (at t_end, its key lowers D_k's), so the first sweep needs to visit only the circles next
+    to a circle with an event in the step; circles whose D falls later activate their own
     neighbours. The fixed point is the same as from an all-active start.
     """
     horizon = ti.cast(t_end, real)
-    for i in range(d.shape[0]):
+    n = d.shape[0]
+    for i in range(n):
         d[i] = horizon
-    for i in range(d.shape[0]):
-        if ev_t[i] < horizon:
+        d_key[i, 0] = n + BOUND_KEY_NONE
+        d_key[i, 1] = n + BOUND_KEY_NONE
+    for i in range(n):
+        if ev_t[i] <= horizon:  # events at the step's end too: their keys order them (a step cut there)
             mark_neighbours_dirty(i, active, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
 
 
 @ti.func
 def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
-                 ev_t: ti.template(), d: ti.template(), active_in: ti.template(), active_out: ti.template(),
-                 cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs,
-                 box_w, box_h, t_end, vlim, real: ti.template(), periodic: ti.template()):
+                 ev_t: ti.template(), ev_p: ti.template(), ids: ti.template(), d: ti.template(),
+                 d_key: ti.template(), active_in: ti.template(), active_out: ti.template(), cell_of: ti.template(),
+                 cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, t_end, vlim,
+                 real: ti.template(), periodic: ti.template()):
     """One in-place sweep of D_k = min_l F_kl(min(t_l, D_l)) over the active circles; returns how many D decreased.
 
     F_kl(s) is the earliest time at which k, on its straight path, can meet l when l leaves
     its straight path at s: with T = max(s, tau_k, tau_l), g the straight-path gap at T and
     dv their relative velocity, contact needs g - |dv| (t - T) <= 2 vlim (t - s), so
-    F = (g + |dv| T + 2 vlim s) / (|dv| + 2 vlim) >= s. F is monotone in s, so the sweeps
+    F = s + (g + |dv| (T - s)) / (|dv| + 2 vlim) >= s. F is monotone in s, so the sweeps
     decrease D towards the unique fixed point whatever the order of updates. A circle whose
     D decreased marks its neighbours active for the next sweep (`active_out`); nothing else
     can change, so the sweeps end when no circle is active.
+
+    D carries a key (`d_key`), so that events at one instant run in the order of their keys,
+    as from the queue. Where F = s (k touches l when l's path changes), the change could
+    reach k at that very instant, and D_k takes the key of the event that starts it (l's
+    own, or the one D_l carries): an event of k at that time runs only when its key is not
+    above it (`execute`), so not before an event of lower key at that instant whose outcome
+    could make another with k first (a Newton's cradle of unequal masses ran its collisions
+    in another order than the queue). Where F > s, D_k takes the lowest key (`BOUND_KEY_LOW`):
+    an event of k at exactly F waits for the next round. The bounds compare as (time, key).
     """
     n = pos.shape[0]
     two_v = ti.cast(2.0 * vlim, real)
@@ -581,23 +600,42 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
         rk = radius[k]
         tk = tau[k]
         dk = d[k]
+        dk_lo = d_key[k, 0]
+        dk_hi = d_key[k, 1]
         c = cell_of[k]
         for row, seg in ti.ndrange(rows, segs):
             k_lo, k_hi = neighbour_range(c, row, seg, cell_start, ncx, ncy, periodic)
             for m in range(k_lo, k_hi):
                 l = sorted_ids[m]
                 s = ti.min(ev_t[l], d[l])
-                if l != k and s < dk:
+                if l != k and s <= dk:
+                    # s's key: l's event's, or the key its bound carries (the lower at a tie).
+                    s_lo, s_hi = _tie_ids(l, ev_p, ids, n)
+                    if key_less(d[l], d_key[l, 0], d_key[l, 1], ev_t[l], s_lo, s_hi):
+                        s_lo = d_key[l, 0]
+                        s_hi = d_key[l, 1]
                     t0 = ti.max(s, ti.max(tk, tau[l]))
-                    gap = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box,
-                                       periodic).norm() - rk - radius[l]
+                    dx = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box, periodic)
+                    reach = rk + radius[l]
+                    gap = dx.norm() - reach
+                    if dx.dot(dx) - reach * reach <= 0:
+                        gap = 0.0  # in contact as a time of impact reads it (`_time_of_impact`)
                     dv = (vel[l] - vk).norm()
-                    # F >= s exactly; the max keeps round-off from putting it below.
-                    arrival = ti.max(s, (ti.max(gap, 0.0) + dv * t0 + two_v * s) / (dv + two_v))
-                    if arrival < dk:
+                    # F = s + (gap + |dv| (t0 - s)) / (|dv| + 2 vlim) >= s: exactly s for circles in
+                    # contact at s (the form (g + |dv| t0 + 2 vlim s) / (|dv| + 2 vlim) rounds above
+                    # it), so that such a bound carries the key of the event at s.
+                    arrival = s + (ti.max(gap, 0.0) + dv * (t0 - s)) / (dv + two_v)
+                    if arrival > s:
+                        s_lo = BOUND_KEY_LOW
+                        s_hi = BOUND_KEY_LOW
+                    if key_less(arrival, s_lo, s_hi, dk, dk_lo, dk_hi):
                         dk = arrival
-        if dk < d[k]:
+                        dk_lo = s_lo
+                        dk_hi = s_hi
+        if key_less(dk, dk_lo, dk_hi, d[k], d_key[k, 0], d_key[k, 1]):
             d[k] = dk
+            d_key[k, 0] = dk_lo
+            d_key[k, 1] = dk_hi
             changed += 1
             mark_neighbours_dirty(k, active_out, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
     return changed
@@ -605,23 +643,23 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
 
 @ti.func
 def _sweeps(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(), ev_t: ti.template(),
-            d: ti.template(), active_a: ti.template(), active_b: ti.template(), cell_of: ti.template(),
-            cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, t_end, vlim,
-            real: ti.template(), periodic: ti.template()):
+            ev_p: ti.template(), ids: ti.template(), d: ti.template(), d_key: ti.template(), active_a: ti.template(),
+            active_b: ti.template(), cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(),
+            ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real: ti.template(), periodic: ti.template()):
     """SWEEPS_PER_LAUNCH sweeps (an even number, so the flags end in `active_a` again); returns how
     many D decreased in the last one. A sweep after one that changed nothing finds no active circle."""
     changed = 0
     for _ in ti.static(range(SWEEPS_PER_LAUNCH // 2)):
-        _bound_sweep(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
-                     rows, segs, box_w, box_h, t_end, vlim, real, periodic)
-        changed = _bound_sweep(pos, vel, radius, tau, ev_t, d, active_b, active_a, cell_of, cell_start, sorted_ids,
-                               ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+        _bound_sweep(pos, vel, radius, tau, ev_t, ev_p, ids, d, d_key, active_a, active_b, cell_of, cell_start,
+                     sorted_ids, ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+        changed = _bound_sweep(pos, vel, radius, tau, ev_t, ev_p, ids, d, d_key, active_b, active_a, cell_of,
+                               cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
     return changed
 
 
 @launch.kernel
 def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
-                dirty: ndarr, moved: ndarr, d: ndarr, active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
+                dirty: ndarr, moved: ndarr, d: ndarr, d_key: ti.types.ndarray(ndim=2), active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, scalars: ndarr, real: ti.template(),
                 periodic: ti.template()) -> ti.f64:
@@ -630,9 +668,10 @@ def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, e
     in the step when it exceeds t_end), or -1 when more sweeps are needed."""
     _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, moved, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
              segs, box_w, box_h, t_end, scalars, real, periodic, True)
-    _seed_bounds(ev_t, d, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real, periodic)
-    changed = _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
-                      rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+    _seed_bounds(ev_t, d, d_key, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real,
+                 periodic)
+    changed = _sweeps(pos, vel, radius, tau, ev_t, ev_p, ids, d, d_key, active_a, active_b, cell_of, cell_start,
+                      sorted_ids, ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
     result = ti.cast(scalars[0], ti.f64)
     if changed != 0:
         result = -1.0
@@ -640,12 +679,12 @@ def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, e
 
 
 @launch.kernel
-def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, d: ndarr, active_a: ndarr,
-                active_b: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-                rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
-                real: ti.template(), periodic: ti.template()) -> ti.i32:
-    return _sweeps(pos, vel, radius, tau, ev_t, d, active_a, active_b, cell_of, cell_start, sorted_ids, ncx, ncy,
-                   rows, segs, box_w, box_h, t_end, vlim, real, periodic)
+def more_sweeps(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ev_t: ndarr, ev_p: ndarr, ids: ndarr, d: ndarr,
+                d_key: ti.types.ndarray(ndim=2), active_a: ndarr, active_b: ndarr, cell_of: ndarr, cell_start: ndarr,
+                sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64,
+                t_end: ti.f64, vlim: ti.f64, real: ti.template(), periodic: ti.template()) -> ti.i32:
+    return _sweeps(pos, vel, radius, tau, ev_t, ev_p, ids, d, d_key, active_a, active_b, cell_of, cell_start,
+                   sorted_ids, ncx, ncy, rows, segs, box_w, box_h, t_end, vlim, real, periodic)
 
 
 @launch.kernel
@@ -761,7 +800,7 @@ def _log(e, a, b, t_offset, counters: ti.template(), log_t: ti.template(), log_i
 
 @launch.kernel
 def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
-            bound_t: ndarr, dirty: ndarr, moved: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
+            bound_t: ndarr, bound_key: ti.types.ndarray(ndim=2), dirty: ndarr, moved: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr, wall_impulse: ndarr,
             cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32,
             box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64, t_offset: ti.f64, scalars: ndarr, counters: ndarr,
             log_t: ndarr, log_i: ndarr, log_j: ndarr,
@@ -774,7 +813,9 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
         box = ti.Vector([box_w, box_h], dt=real)
         e = ev_t[i]
         p = ev_p[i]
-        if e <= horizon and e <= bound_t[i]:
+        lo, hi = _tie_ids(i, ev_p, ids, n)
+        # At or before the bound, by (time, key): see `_bound_sweep`.
+        if e <= horizon and not key_less(bound_t[i], bound_key[i, 0], bound_key[i, 1], e, lo, hi):
             if p < 0 and p != NO_EVENT:
                 if ti.static(not periodic):
                     _wall_event(i, e, p, pos, vel, radius, inv_mass, tau, wall_count, wall_impulse, box)
@@ -784,7 +825,8 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
                         counters[0] = 1  # progress flag: a plain store, written once
                     if ti.static(record):
                         _log(e, ids[i], p, t_offset, counters, log_t, log_i, log_j)
-            elif p > i and ev_p[p] == i and ev_t[p] == e and e <= bound_t[p]:
+            elif p > i and ev_p[p] == i and ev_t[p] == e and not key_less(bound_t[p], bound_key[p, 0],
+                                                                          bound_key[p, 1], e, lo, hi):
                 j = p
                 status = _pair_event(i, j, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
                                      virial, box, periodic)

@@ -841,6 +841,8 @@ class Simulation:
         self._dirty = ti.ndarray(ti.i32, shape=n)
         self._moved = ti.ndarray(ti.i32, shape=n)
         self._d1 = ti.ndarray(real, shape=n)
+        # The key each round's bound carries (`event._bound_sweep`); the queue has no bounds.
+        self._d_key = ti.ndarray(ti.i32, shape=(1 if self._event_queue else n, 2))
         self._active = (ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n))
         reductions.fill_i32(self._active[1], 0)
         # The queue's calendar (`event.queue_step`): each circle's back link (the bucket heads:
@@ -1117,11 +1119,12 @@ class Simulation:
         # A step that can end takes a few rounds; from JAM_CHECK_ROUNDS rounds on (and at every
         # doubling) its events so far are counted, and a jam stops it as on the queue.
         rounds, check = 0, JAM_CHECK_ROUNDS
-        sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._d1, *self._active, *g, w, hgt)
+        sweep_args = (self.pos, self.vel, self.radius, self.tau, self._ev_t, self._ev_p, self.ids, self._d1,
+                      self._d_key, *self._active, *g, w, hgt)
         while True:
             tmin = event.begin_round(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                     self._dirty, self._moved, self._d1, *self._active, *g, w, hgt, t_end, vlim, self._scalars,
-                                     real, periodic)
+                                     self._dirty, self._moved, self._d1, self._d_key, *self._active, *g, w, hgt, t_end,
+                                     vlim, self._scalars, real, periodic)
             if tmin > t_end:
                 break
             # The bounds have settled when tmin >= 0; -1 asks for more sweeps.
@@ -1134,8 +1137,8 @@ class Simulation:
                     raise RuntimeError(f"causal bounds did not settle in {MAX_BOUND_SWEEPS} sweeps (internal error)")
             self.sweeps += sweeps
             executed = event.execute(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
-                                     self._ev_p, self._d1, self._dirty, self._moved, self.pair_count, self.wall_count,
-                                     self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self._time,
+                                     self._ev_p, self._d1, self._d_key, self._dirty, self._moved, self.pair_count,
+                                     self.wall_count, self.virial, self.wall_impulse, *g, w, hgt, t_end, vlim, self._time,
                                      self._scalars, self._counters, self._log_t, self._log_i, self._log_j, real,
                                      periodic, record)
             self.rounds += 1

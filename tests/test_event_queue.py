@@ -670,3 +670,59 @@ def test_a_split_that_fails_after_a_window_ran_refines_the_rest_of_the_step(circ
         assert all(length > 0 for _, length in windows), windows
         assert all(b[0] == pytest.approx(a[0] + a[1], rel=1e-12) for a, b in zip(windows, windows[1:])), windows
     assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
+
+
+def _cascade(velocities, masses):
+    """1-D elastic collisions along a row of touching circles at one instant, in key order: the
+    approaching pair of lowest ids first, until none approaches (exact, in fractions)."""
+    from fractions import Fraction
+
+    v = [Fraction(x) for x in velocities]
+    m = [Fraction(x) for x in masses]
+    while True:
+        i = next((i for i in range(len(v) - 1) if v[i] > v[i + 1]), None)
+        if i is None:
+            return [float(x) for x in v]
+        a, b = m[i], m[i + 1]
+        v[i], v[i + 1] = ((a - b) * v[i] + 2 * b * v[i + 1]) / (a + b), ((b - a) * v[i + 1] + 2 * a * v[i]) / (a + b)
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("masses", [[1, 2, 0.5, 3, 1, 7], [7, 1, 3, 0.5, 2, 1]])
+def test_collisions_at_one_instant_run_in_key_order_in_the_rounds_as_in_the_queue(circles_cpu, monkeypatch,
+                                                                                   masses):
+    """A Newton's cradle of unequal masses: after the first hit every collision of the row falls
+    at one instant, and their order (the keys': lowest ids first) decides the outcome. The
+    rounds ran an event whose bound equalled its time in the same round as one of lower key
+    that made a third event with one of its circles, first: another order than the queue's
+    (circle 4 left at +0.25 instead of -0.039). Now the bounds carry the key of the event that
+    sets them, and both give the cascade in key order, bit for bit between them."""
+    from circles import simulation
+
+    r = 0.125
+    pos = np.array([[0.5, 1.0]] + [[1.0 + 0.25 * k, 1.0] for k in range(5)])  # a row in contact, exactly
+    vel = np.array([[1.0, 0.0]] + [[0.0, 0.0]] * 5)
+    runs = {}
+    for queue in (True, False):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        sim = circles_cpu.Simulation.from_arrays(pos, vel, r, mass=masses, box=(4.0, 2.0), record_events=100)
+        sim.advance(0.5)  # the hit at 0.25, then the circles part; no wall is reached
+        runs[queue] = sim
+    expected = _cascade([1, 0, 0, 0, 0, 0], masses)
+    for sim in runs.values():
+        assert sim.state().vel[:, 0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    queue, rounds = runs[True].state(), runs[False].state()
+    assert np.array_equal(queue.pos, rounds.pos) and np.array_equal(queue.vel, rounds.vel)
+    assert np.array_equal(runs[True].events(), runs[False].events())
+    # A row resting against a wall, hit from the other side: the wall's events take part.
+    row = np.array([[0.125 + 0.25 * k, 1.0] for k in range(4)] + [[2.0, 1.0]])
+    ends = []
+    for queue in (True, False):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        sim = circles_cpu.Simulation.from_arrays(row, np.array([[0.0, 0.0]] * 4 + [[-1.0, 0.0]]), r,
+                                                 mass=masses[:5], box=(4.0, 2.0), record_events=1000)
+        sim.advance(3.0)
+        ends.append((sim.state(), sim.stats()["pair_collisions"], sim.stats()["wall_collisions"]))
+    (a, pa, wa), (b, pb, wb) = ends
+    assert (pa, wa) == (pb, wb) and pa > 4
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
