@@ -609,11 +609,6 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
                 l = sorted_ids[m]
                 s = ti.min(ev_t[l], d[l])
                 if l != k and s <= dk:
-                    # s's key: l's event's, or the key its bound carries (the lower at a tie).
-                    s_lo, s_hi = _tie_ids(l, ev_p, ids, n)
-                    if key_less(d[l], d_key[l, 0], d_key[l, 1], ev_t[l], s_lo, s_hi):
-                        s_lo = d_key[l, 0]
-                        s_hi = d_key[l, 1]
                     t0 = ti.max(s, ti.max(tk, tau[l]))
                     dx = displacement(xk + vk * (t0 - tk), pos[l] + vel[l] * (t0 - tau[l]), box, periodic)
                     reach = rk + radius[l]
@@ -625,9 +620,13 @@ def _bound_sweep(pos: ti.template(), vel: ti.template(), radius: ti.template(), 
                     # contact at s (the form (g + |dv| t0 + 2 vlim s) / (|dv| + 2 vlim) rounds above
                     # it), so that such a bound carries the key of the event at s.
                     arrival = s + (ti.max(gap, 0.0) + dv * (t0 - s)) / (dv + two_v)
-                    if arrival > s:
-                        s_lo = BOUND_KEY_LOW
-                        s_hi = BOUND_KEY_LOW
+                    s_lo = BOUND_KEY_LOW
+                    s_hi = BOUND_KEY_LOW
+                    if arrival == s:  # in contact (rare): s's key, l's event's or its bound's, the lower
+                        s_lo, s_hi = _tie_ids(l, ev_p, ids, n)
+                        if key_less(d[l], d_key[l, 0], d_key[l, 1], ev_t[l], s_lo, s_hi):
+                            s_lo = d_key[l, 0]
+                            s_hi = d_key[l, 1]
                     if key_less(arrival, s_lo, s_hi, dk, dk_lo, dk_hi):
                         dk = arrival
                         dk_lo = s_lo
