@@ -1018,7 +1018,11 @@ class Simulation:
                 # next step is made for the speeds after it. Each such cut makes the largest
                 # speed SPEED_MARGIN times larger, which the energy bounds: it cannot go on.
                 stalled = stalled + 1 if done == 0 else 0
-                if self._time == before and (done > 0 or stalled > MOST_STALLED_STEPS):
+                if stalled > MOST_STALLED_STEPS:
+                    raise RuntimeError(f"{stalled} steps in a row from time {self._time:g} were cut at their start by "
+                                       "collisions that would outrun the grid, though each makes the largest speed "
+                                       f"{SPEED_MARGIN} times larger (internal error)")
+                if self._time == before and done > 0:
                     # A step cut short (a periodic box's limit, or a collision that would outrun
                     # the grid) below the clock's resolution: the next would be cut the same way.
                     raise ValueError(f"a step was cut to {done:g} s, below the resolution of the simulated clock "
