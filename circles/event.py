@@ -1178,8 +1178,8 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, speed_out: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
-               r_cut: ti.f64, margin: ti.f64, most: ti.i32, real: ti.template(), periodic: ti.template(),
-               record: ti.template(), two_level: ti.template(), serial: ti.template(),
+               r_cut: ti.f64, margin: ti.f64, most: ti.i32, per_bucket: ti.i32, real: ti.template(),
+               periodic: ti.template(), record: ti.template(), two_level: ti.template(), serial: ti.template(),
                at_start: ti.template()) -> ti.f64:
     """A whole step from one queue (see above), every circle moved to its end at the last
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
@@ -1209,9 +1209,10 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
         _first_predictions(pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
                            rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
                            margin, real, periodic, two_level, serial, False)
-    # Buckets: one per QUEUE_BUCKET_CIRCLES circles, and at most n, so that the loop below resets
-    # every one (the parts' calendars, which share the array, take more of it).
-    nb = ti.min(head.shape[0], ti.max(n // QUEUE_BUCKET_CIRCLES, 1))
+    # Buckets: one per `per_bucket` circles (QUEUE_BUCKET_CIRCLES when the head array was made),
+    # and at most n, so that the loop below resets every one (the parts' calendars, which share
+    # the array, take more of it).
+    nb = ti.min(head.shape[0], ti.max(n // per_bucket, 1))
     scale = ti.min(nb / t_end, 1e30)  # float64 (see `_bucket`)
     ti.loop_config(serialize=serial)
     for i in range(n):
@@ -1584,8 +1585,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
                 parts: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, mark: ti.i32,
-                first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, real: ti.template(),
-                record: ti.template(), periodic: ti.template()):
+                first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, per_bucket: ti.i32,
+                most_per_circle: ti.i32, real: ti.template(), record: ti.template(), periodic: ti.template()):
     """The events up to `until` of a step over [0, t_end] of circles split into parts
     (`split_parts`, one grid level), from the events the circles hold (`repredict`), or with
     `first` (the step's first window) from the events each part predicts for its circles
@@ -1594,7 +1595,11 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     (`_drain`) by one thread, the threads taking parts in turn.
     Circles stay at their clocks (`finish` moves them to the step's end). result[k]: what
     `queue_step` returns, for part k. Part k's queue uses the slots info[k] to info[k + 1] of
-    heap, heap_t and pending, and the buckets from info[k] // QUEUE_BUCKET_CIRCLES + k of head."""
+    heap, heap_t and pending, and the buckets from info[k] // per_bucket + k of head (one per
+    `per_bucket` circles, the width the head array was made for); a part stops after
+    `most_per_circle` events a circle. Both come as arguments, not as the module's constants
+    (QUEUE_BUCKET_CIRCLES, MOST_EVENTS_PER_CIRCLE), which a kernel reads once, when it compiles:
+    a head array made for another width than the compiled one was written past its end."""
     n = pos.shape[0]
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     info[3 * parts + 1] = 0  # parts taken
@@ -1613,8 +1618,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 c0 = info[parts + 1 + k]
                 s_lo, s_hi = _strip_slots(k, rows_per, parts, ncx, ncy, cell_start, periodic)
                 items = s_hi + info[2 * parts + 1 + k] - c0
-                hb = off // QUEUE_BUCKET_CIRCLES + k
-                nb = ti.max(size_k // QUEUE_BUCKET_CIRCLES, 1)
+                hb = off // per_bucket + k
+                nb = ti.max(size_k // per_bucket, 1)
                 scale = ti.min(nb / t_end, 1e30)
                 for b in range(nb):
                     head[hb + b] = -1
@@ -1640,7 +1645,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                         stamp[i] = 0
                         if ev_p[i] != NO_EVENT:
                             size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
-                most = ti.cast(ti.min(ti.cast(size_k, ti.i64) * MOST_EVENTS_PER_CIRCLE, 1 << 30), ti.i32)
+                most = ti.cast(ti.min(ti.cast(size_k, ti.i64) * most_per_circle, 1 << 30), ti.i32)
                 reached, unused = _drain(size, horizon, stop, t_end, most, scale, nb, off, hb, queue,
                                          (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
                                          (pair_count, virial, wall_count, wall_impulse),

@@ -767,10 +767,12 @@ class Simulation:
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
         n = self.n
         # The calendar's bucket heads (`event.queue_step`); each part's calendar takes one bucket
-        # more than its share (see event.queue_parts).
-        buckets = max(n // event.QUEUE_BUCKET_CIRCLES, 1) if self._event_queue else 1
+        # more than its share (see event.queue_parts). The queue's kernels take the width these
+        # heads are made for as an argument.
+        self._per_bucket = event.QUEUE_BUCKET_CIRCLES
+        buckets = max(n // self._per_bucket, 1) if self._event_queue else 1
         if self._parts:
-            buckets = n // event.QUEUE_BUCKET_CIRCLES + event.MOST_PARTS + 1
+            buckets = n // self._per_bucket + event.MOST_PARTS + 1
         self._head = ti.ndarray(ti.i32, shape=buckets)
         if not self._parts:
             return
@@ -1210,8 +1212,8 @@ class Simulation:
                                    self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self._time, self._counters, self._log_t, self._log_i,
-                                   self._log_j, self._speed_out, *levels, event.most_events(self.n), real,
-                                   periodic, record, two,
+                                   self._log_j, self._speed_out, *levels, event.most_events(self.n),
+                                   self._per_bucket, real, periodic, record, two,
                                    self._serial, at_start)
         self.rounds += 1
         # queue_step's finish left the largest speed in _speed_out; its return synchronised.
@@ -1282,7 +1284,8 @@ class Simulation:
                                   *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
                                   self._part_result, *cell_args, rows_per, parts, w, hgt, end, min(t1, end), vlim,
                                   self._time, self._mark, first, self._counters, self._log_t, self._log_i,
-                                  self._log_j, self._real, record, periodic)
+                                  self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE, self._real, record,
+                                  periodic)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]
                 if np.any(reached == -2):

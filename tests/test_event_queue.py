@@ -572,6 +572,42 @@ def test_parts_calendar_any_bucket_width(circles_cpu, monkeypatch, per_bucket):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+@pytest.mark.parametrize("in_parts", [False, True], ids=["one-queue", "parts"])
+def test_queue_uses_the_bucket_width_its_heads_were_made_for(circles_cpu, monkeypatch, in_parts):
+    """A simulation's calendar heads are made for the QUEUE_BUCKET_CIRCLES of its making, and
+    its queue's kernels use that width, though they were compiled for another: a Taichi kernel
+    reads a module's constant once, when it compiles, so a kernel that read the width itself
+    kept the first simulation's (4 circles a bucket), and in parts wrote past the end of heads
+    made for wider buckets (the suite crashed once in test_parts_calendar_any_bucket_width).
+    With one circle a bucket, a step touches one head a circle: n of them in one queue, and in
+    parts n plus at most one more for each part of each window (`event.queue_parts`), against
+    about n / 4 at the compiled width. Heads are filled with a mark first; the touched ones are
+    those that no longer hold it."""
+    from circles import event
+
+    side = 0.8 * np.sqrt(10)
+    scene = dict(SCENES["walls-f32-equal"], n=20000, box=(side, side))
+    if in_parts:
+        on_threads(monkeypatch)
+        monkeypatch.setattr(event, "PART_CIRCLES", 2000)
+    run(circles_cpu, monkeypatch, scene, True, steps=2)  # the kernels compiled (or found) at the default width
+    monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", 1)
+    sim = run(circles_cpu, monkeypatch, scene, True, steps=2)
+    if in_parts and not sim._parts:
+        pytest.skip("one thread: no parts")
+    assert sim._parts == in_parts
+    mark = 12345
+    sim._head.from_numpy(np.full(sim._head.shape, mark, dtype=np.int32))
+    windows = sim.parts_run
+    sim.step(1)
+    touched = int(np.count_nonzero(sim._head.to_numpy() != mark))
+    if in_parts:
+        assert sim.n <= touched <= sim.n + sim._part_shape()[0] * (sim.parts_run - windows)
+    else:
+        assert touched == sim.n
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_cpu, monkeypatch):
     """event.split_parts gives each border an equal share of `claimed` (its length over the
     borders): a border whose clusters need even one slot more than that must fail the split
