@@ -84,7 +84,7 @@ def pair_time_of_impact(pos: ti.template(), vel: ti.template(), radius: ti.templ
     pair is one whose time every caller rejects: the searches' results do not change, bit for
     bit."""
     return _time_of_impact(own_values(lo, pos, vel, radius, tau), own_values(hi, pos, vel, radius, tau), box,
-                           horizon, real, periodic)
+                           horizon, real, periodic, ti.static(_at_step_start(tau)))
 
 
 class _StepStart:
@@ -98,6 +98,12 @@ class _StepStart:
 
 #: The clocks at a step's start (`_StepStart`), for the first predictions.
 STEP_START = _StepStart()
+
+
+def _at_step_start(tau) -> bool:
+    """Whether the clocks `tau` are `STEP_START` (known when a kernel compiles): then a time of
+    impact starts from the positions themselves, with no advance along the velocities."""
+    return isinstance(tau, _StepStart)
 
 
 @ti.func
@@ -119,18 +125,28 @@ def pair_time(i, own: ti.template(), j, pos: ti.template(), vel: ti.template(), 
     if ti.static(periodic):
         t = pair_time_of_impact(pos, vel, radius, tau, ti.min(i, j), ti.max(i, j), box, horizon, real, periodic)
     else:
-        t = _time_of_impact(own, own_values(j, pos, vel, radius, tau), box, horizon, real, periodic)
+        t = _time_of_impact(own, own_values(j, pos, vel, radius, tau), box, horizon, real, periodic,
+                            ti.static(_at_step_start(tau)))
     return t
 
 
 @ti.func
 def _time_of_impact(u: ti.template(), w: ti.template(), box, horizon, real: ti.template(),
-                    periodic: ti.template()):
+                    periodic: ti.template(), start: ti.template()):
     """The time of impact of two circles of values u and w (`own_values`), as
-    `pair_time_of_impact` describes it."""
-    t0 = ti.max(u[0], w[0])
-    xu = u[1] + u[2] * (t0 - u[0])
-    xw = w[1] + w[2] * (t0 - w[0])
+    `pair_time_of_impact` describes it. `start`: both clocks are 0 (`STEP_START`), so the places
+    at the pair's start time are the positions themselves: x + v * 0 is x for a finite v and a
+    position x > 0, and the compiler does not fold the product by zero away (it may not, for an
+    infinite v), so it is left out here; the same numbers."""
+    t0 = ti.cast(0.0, real)
+    xu = u[1]
+    xw = w[1]
+    if ti.static(not start):
+        # The later clock, as a plain comparison (clocks are never NaN): one instruction, where
+        # ti.max's NaN-aware form takes three.
+        t0 = ti.select(u[0] < w[0], w[0], u[0])
+        xu = u[1] + u[2] * (t0 - u[0])
+        xw = w[1] + w[2] * (t0 - w[0])
     dx = displacement(xu, xw, box, periodic)
     dv = w[2] - u[2]
     s = u[3] + w[3]
