@@ -148,6 +148,31 @@ def cpu_model():
     return platform.processor() or platform.machine()
 
 
+def cpu_details():
+    """The CPU's family and model and its caches (one core's L2, the L3), as Linux reports them:
+    hosts sold under one model name differ (see bench/PERFORMANCE.md); '' where unknown."""
+    parts = []
+    try:
+        with open("/proc/cpuinfo") as f:
+            info = {}
+            for line in f:
+                key, _, value = line.partition(":")
+                info.setdefault(key.strip(), value.strip())
+        for key in ("cpu family", "model"):
+            value = info.get(key, "")
+            if value:
+                parts.append(f"{key.split()[-1]} {value}")
+    except OSError:
+        pass
+    for index in (2, 3):
+        try:
+            with open(f"/sys/devices/system/cpu/cpu0/cache/index{index}/size") as f:
+                parts.append(f"L{index} {f.read().strip()}")
+        except OSError:
+            pass
+    return ", ".join(parts)
+
+
 def gpu_model():
     try:
         out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
@@ -701,7 +726,8 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
                    memory=(), spreads=()):
     lines = [f"# circles benchmark: {meta['machine_name']}", "",
              f"Command: `{meta['command']}`  ", f"Date: {meta['date']}  ", f"Engine: {meta['revision']}  ",
-             f"Machine: {meta['machine_name']}, {meta['cores']} cores; arch {meta['arch']}; taichi {meta['taichi']}, "
+             f"Machine: {meta['machine_name']}{meta['cpu_details']}, {meta['cores']} cores; arch {meta['arch']}; "
+             f"taichi {meta['taichi']}, "
              f"pymunk {meta['pymunk']}, numpy {np.__version__}, Python {platform.python_version()}  ",
              f"Wall time of the whole run: {meta['wall_s']:.0f} s. Timings are noisy (a shared machine): "
              "medians with min and max over repeats.", ""]
@@ -876,7 +902,8 @@ def main(argv=None):
     precisions = cfg.get("precisions", PRECISIONS)
     errors = []
     scratch = " (a scratch folder: give --out to keep the results elsewhere)" if args.out == QUICK_OUT else ""
-    log(f"circles benchmark on {machine_name} ({arch}), writing {outdir}{scratch}")
+    details = cpu_details() if arch == "cpu" else ""
+    log(f"circles benchmark on {machine_name}{f' ({details})' if details else ''} ({arch}), writing {outdir}{scratch}")
     if removed:
         log(f"  removed the earlier run's {', '.join(removed)} there")
 
@@ -916,7 +943,8 @@ def main(argv=None):
     def save(section, final=False):
         """Write every table so far: a run stopped later still leaves what it measured."""
         version = ti.__version__
-        meta = dict(machine_name=machine_name, cores=os.cpu_count(), arch=arch,
+        meta = dict(machine_name=machine_name, cpu_details=f" ({details})" if details else "", cores=os.cpu_count(),
+                    arch=arch,
                     taichi=".".join(map(str, version)) if isinstance(version, tuple) else str(version),
                     pymunk=pymunk_version(), revision=engine_revision(), command=command,
                     date=datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"), wall_s=now() - start,
