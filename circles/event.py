@@ -433,7 +433,9 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
 
     (On several threads the offers of two threads could meet at one circle; there each circle
     searches all its cells, `queue_step`. Threads that take bands of rows of cells, even bands
-    then odd ones, need no atomics, but measured no faster on 2 cores at 1e5 and 1e6.)"""
+    then odd ones, need no atomics, but measured no faster on 2 cores at 1e5 and 1e6; nor did
+    one part of the slots per thread, then the pairs across the parts' ends on one thread, at
+    1e5: see bench/PERFORMANCE.md.)"""
     n = pos.shape[0]
     if ti.static(not fresh):
         ti.loop_config(serialize=True)
