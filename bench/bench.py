@@ -137,40 +137,37 @@ def slug(text):
     return re.sub(r"[^a-z0-9]+", "-", text).strip("-") or "unknown"
 
 
-def cpu_model():
+def cpu_info():
+    """The first processor's fields of /proc/cpuinfo ({} where it cannot be read)."""
+    info = {}
     try:
         with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def cpu_details():
-    """The CPU's family and model and its caches (one core's L2, the L3), as Linux reports them:
-    hosts sold under one model name differ (see bench/PERFORMANCE.md); '' where unknown."""
-    parts = []
-    try:
-        with open("/proc/cpuinfo") as f:
-            info = {}
             for line in f:
                 key, _, value = line.partition(":")
                 info.setdefault(key.strip(), value.strip())
-        for key in ("cpu family", "model"):
-            value = info.get(key, "")
-            if value:
-                parts.append(f"{key.split()[-1]} {value}")
     except OSError:
         pass
+    return info
+
+
+def cpu_model():
+    info = cpu_info()
+    return info["model name"] if "model name" in info else platform.processor() or platform.machine()
+
+
+def cpu_details():
+    """' (family F, model M, L2 ..., L3 ...)': the CPU's family and model and its caches (one
+    core's L2, the L3), as Linux reports them, since hosts sold under one model name differ
+    (see bench/PERFORMANCE.md); '' where none is known."""
+    info = cpu_info()
+    parts = [f"{key.split()[-1]} {info[key]}" for key in ("cpu family", "model") if info.get(key)]
     for index in (2, 3):
         try:
             with open(f"/sys/devices/system/cpu/cpu0/cache/index{index}/size") as f:
                 parts.append(f"L{index} {f.read().strip()}")
         except OSError:
             pass
-    return ", ".join(parts)
+    return f" ({', '.join(parts)})" if parts else ""
 
 
 def gpu_model():
@@ -903,7 +900,7 @@ def main(argv=None):
     errors = []
     scratch = " (a scratch folder: give --out to keep the results elsewhere)" if args.out == QUICK_OUT else ""
     details = cpu_details() if arch == "cpu" else ""
-    log(f"circles benchmark on {machine_name}{f' ({details})' if details else ''} ({arch}), writing {outdir}{scratch}")
+    log(f"circles benchmark on {machine_name}{details} ({arch}), writing {outdir}{scratch}")
     if removed:
         log(f"  removed the earlier run's {', '.join(removed)} there")
 
@@ -943,8 +940,7 @@ def main(argv=None):
     def save(section, final=False):
         """Write every table so far: a run stopped later still leaves what it measured."""
         version = ti.__version__
-        meta = dict(machine_name=machine_name, cpu_details=f" ({details})" if details else "", cores=os.cpu_count(),
-                    arch=arch,
+        meta = dict(machine_name=machine_name, cpu_details=details, cores=os.cpu_count(), arch=arch,
                     taichi=".".join(map(str, version)) if isinstance(version, tuple) else str(version),
                     pymunk=pymunk_version(), revision=engine_revision(), command=command,
                     date=datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"), wall_s=now() - start,
