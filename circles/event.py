@@ -1049,17 +1049,14 @@ def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: 
 def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.template(), state: ti.template(),
            sums: ti.template(), grid: ti.template(), log: ti.template(), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my,
            r_cut, margin, t_offset, box, vlim2, real: ti.template(), periodic: ti.template(), record: ti.template(),
-           two_level: ti.template(), part: ti.template(), window: ti.template(), mark):
+           two_level: ti.template(), part: ti.template()):
     """Execute a filled queue's events in key order up to `horizon` (see above), each followed
     by the searches it calls for; returns (reached, horizon): as `queue_step` returns, and the
     step's end, moved to the time of a collision that would outrun the grid. state: (pos, vel,
     radius, inv_mass, tau, ids, ev_t, ev_p, stamp); sums: (pair_count, virial, wall_count,
     wall_impulse); grid: (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids); log:
     (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`.
-    Events after `until` (at most the horizon) are left in the queue. `window`: () or, for a
-    window of a step split into parts (`queue_parts`), (saved, backup): each changed circle's
-    state is copied to `backup` before its first change in the window (saved[i] = mark, the
-    window's number)."""
+    Events after `until` (at most the horizon) are left in the queue."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
@@ -1086,10 +1083,6 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             break  # the queue holds events up to the end the step had before it was cut
         p = ev_p[c]
         changed = 1
-        if ti.static(len(window) > 0):
-            _save_first(c, window, mark, state, sums)
-            if p >= 0:
-                _save_first(p, window, mark, state, sums)
         if p >= 0:
             if ev_p[p] != c or ev_t[p] != e:
                 reached = -1.0
@@ -1147,19 +1140,6 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
             m += 1
     return reached, horizon
-
-
-@ti.func
-def _save_first(x, window: ti.template(), mark, state: ti.template(), sums: ti.template()):
-    """Circle x's state into the backup, unless it is there already this window (see `_drain`)."""
-    if window[0][x] != mark:
-        window[0][x] = mark
-        b = ti.static(window[1])
-        b[0][x] = state[0][x]
-        b[1][x] = state[1][x]
-        b[2][x] = state[4][x]
-        for k in ti.static(range(4)):
-            b[3 + k][x] = sums[k][x]
 
 
 @ti.func
@@ -1251,7 +1231,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                   (pair_count, virial, wall_count, wall_impulse),
                                   (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
-                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, (), (), 0)
+                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, ())
     # A top-level loop (one inside a branch would run on one thread); the largest speed of the
     # state it leaves in speed_out, and on one thread no event held (`_finish`), for the next step.
     _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True,
@@ -1293,9 +1273,13 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # part: a search that meets a neighbour in another part flags the circle (`_earliest`,
 # `_pair_in_part`), and before the next window the flagged circles search again over all
 # their neighbours (`repredict`). A collision that would outrun the grid ends the step at its
-# time for every circle, but the other parts may have gone past it: the circles the window
-# changed are put back (each was copied before its first change in the window, `_save_first`)
-# and the window runs again up to that time.
+# time for every circle, but the other parts may have gone past it: every circle is put back
+# to the step's start (each part copies its circles' state as its first window begins, while
+# they are in the cache for their first predictions) and the step runs again up to that time.
+# Such steps are rare once the speeds have spread from their start (the speed limit has a
+# margin, simulation.SPEED_MARGIN). The step's copy, one pass over the state while it is in
+# the cache, measured as fast as copying each circle at its first change in every window
+# (bench/PERFORMANCE.md), and needs no flag of which circles were copied nor their clocks.
 
 #: Circles per part (`split_parts`): enough for the borders' clusters to be a small share, few
 #: enough that a part's arrays mostly stay in the cache.
@@ -1564,22 +1548,6 @@ def _pair_in_part(i, j, a: ti.template()):
 
 
 @launch.kernel
-def restore_saved(saved: ndarr, mark: ti.i32, pos: ndarr, vel: ndarr, tau: ndarr, pair_count: ndarr, virial: ndarr,
-                  wall_count: ndarr, wall_impulse: ndarr, b_pos: ndarr, b_vel: ndarr, b_tau: ndarr,
-                  b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr):
-    """Every circle whose state the step saved (saved[i] == mark, see `_drain`) put back."""
-    for i in range(pos.shape[0]):
-        if saved[i] == mark:
-            pos[i] = b_pos[i]
-            vel[i] = b_vel[i]
-            tau[i] = b_tau[i]
-            pair_count[i] = b_pair_count[i]
-            virial[i] = b_virial[i]
-            wall_count[i] = b_wall_count[i]
-            wall_impulse[i] = b_wall_impulse[i]
-
-
-@launch.kernel
 def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
               dirty: ndarr, touched: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
@@ -1597,20 +1565,22 @@ def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_
 def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr,
                 ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
                 prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
-                wall_impulse: ndarr, touched: ndarr, dirty: ndarr, saved: ndarr, b_pos: ndarr, b_vel: ndarr,
-                b_tau: ndarr, b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
+                wall_impulse: ndarr, touched: ndarr, dirty: ndarr, b_pos: ndarr, b_vel: ndarr,
+                b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
                 label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
                 parts: ti.i32, box_w: ti.f64,
-                box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, mark: ti.i32,
-                first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, per_bucket: ti.i32,
+                box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, per_bucket: ti.i32,
                 most_per_circle: ti.i32, real: ti.template(), record: ti.template(), periodic: ti.template()):
     """The events up to `until` of a step over [0, t_end] of circles split into parts
     (`split_parts`, one grid level), from the events the circles hold (`repredict`), or with
     `first` (the step's first window) from the events each part predicts for its circles
     (each pair once, as `_first_events_once`; a pair across two parts flags both circles
     touched, for the next window to search in full): each part's queue filled and run
-    (`_drain`) by one thread, the threads taking parts in turn.
+    (`_drain`) by one thread, the threads taking parts in turn. With `first`, each part also
+    copies its circles' state at the step's start (every clock 0) into the backup (b_pos to
+    b_wall_impulse) before its events run, as it reads them for their walls: a collision that
+    would outrun the grid, in any window, redoes the step from it (`Simulation._queue_parts_step`).
     Circles stay at their clocks (`finish` moves them to the step's end). result[k]: what
     `queue_step` returns, for part k. Part k's queue uses the slots info[k] to info[k + 1] of
     heap, heap_t and pending, and the buckets from info[k] // per_bucket + k of head (one per
@@ -1645,6 +1615,12 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
+                            b_pos[i] = pos[i]
+                            b_vel[i] = vel[i]
+                            b_pair_count[i] = pair_count[i]
+                            b_virial[i] = virial[i]
+                            b_wall_count[i] = wall_count[i]
+                            b_wall_impulse[i] = wall_impulse[i]
                             _first_wall_event(i, pos, vel, radius, STEP_START, ids, ev_t, ev_p, box, horizon, real,
                                               periodic)
                     for q in range(s_lo, items):
@@ -1670,9 +1646,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
-                                         (label, touched, dirty),
-                                         (saved, (b_pos, b_vel, b_tau, b_pair_count, b_virial, b_wall_count,
-                                                  b_wall_impulse)), mark)
+                                         (label, touched, dirty))
                 result[k] = reached
 
 @launch.kernel

@@ -66,9 +66,9 @@ PART_CLAIMS = 4
 #: The split's links (`event.split_parts`) reach this many units in the last place of the
 #: largest coordinate further, against the round-off of the positions within a window.
 LINK_ALLOWANCE_ULPS = 16
-#: The arrays of a circle's state that an event step changes, in the order event.queue_parts
-#: takes their backups.
-BACKUP_ORDER = ("pos", "vel", "tau", "pair_count", "virial", "wall_count", "wall_impulse")
+#: The arrays of a circle's state that an event step changes (the clocks aside, 0 at a step's
+#: start), in the order event.queue_parts takes their backups.
+PARTS_BACKUP_ORDER = ("pos", "vel", "pair_count", "virial", "wall_count", "wall_impulse")
 #: Windows of a step split into parts at most (`Simulation._queue_parts_step`), and the steps
 #: after which a step tries half as many.
 MOST_WINDOWS = 8
@@ -307,7 +307,7 @@ def default_dt(scheme, radius, vel):
 #: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds PART_BYTES a
 #: circle more.
 ARRAY_BYTES = {("event", "f32"): 129, ("event", "f64"): 165, ("discrete", "f32"): 132, ("discrete", "f64"): 156}
-PART_BYTES = {"f32": 61, "f64": 81}
+PART_BYTES = {"f32": 53, "f64": 69}
 
 
 def bytes_per_circle(n, scheme, precision):
@@ -780,12 +780,9 @@ class Simulation:
         self._claimed = ti.ndarray(ti.i32, shape=max(n // PART_CLAIMS, 1))
         self._part_info = ti.ndarray(ti.i32, shape=event.part_info_size(event.MOST_PARTS))
         self._part_result = ti.ndarray(ti.f64, shape=event.MOST_PARTS)
-        # What a step's events changed, put back when a collision would outrun the grid
-        # (`_queue_parts_step`), and the flags of its windows.
-        self._backup = {name: self._like(getattr(self, name)) for name in BACKUP_ORDER}
-        self._saved = ti.ndarray(ti.i32, shape=n)
-        reductions.fill_i32(self._saved, 0)
-        self._mark = 0
+        # The state at the step's start, put back when a collision would outrun the grid
+        # (`_queue_parts_step`; every clock is 0 then), and the flags of its windows.
+        self._backup = {name: self._like(getattr(self, name)) for name in PARTS_BACKUP_ORDER}
         self._touched = ti.ndarray(ti.i32, shape=n)
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
         # The split's absolute allowance on links, against round-off in the window's positions.
@@ -1237,9 +1234,11 @@ class Simulation:
         last one ended with; a split that fails doubles them, up to MOST_WINDOWS, beyond which
         the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as many
         are tried. A collision that would outrun the grid ends the step at its time for
-        every circle, but the other parts may have gone past it: the circles the window changed
-        are put back (`_backup`, taken at each circle's first change in the window) and the
-        window runs again up to that time."""
+        every circle, but the other parts may have gone past it: the step runs again from its
+        start (`_backup`, which each part fills in the first window) up to that time. The
+        events up to it are the same (by causality), and so are their times (a pair's time of
+        impact is computed from the later of its two clocks, which only their own events move),
+        so the state is that of one queue bit for bit."""
         w, hgt = self.box
         record = self._record_cap > 0
         g = self.grid
@@ -1251,41 +1250,45 @@ class Simulation:
             self._windows //= 2
         cell_args = (g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, *spans(g.ncx, g.ncy, self.periodic))
         periodic = self.periodic
-        reductions.fill_i32(self._touched, 0)
-        reductions.fill_i32(self._dirty_w, 0)
-        t0 = 0.0
-        done = 0  # windows of the step done, in the finest cut so far
-        while t0 < h:
-            if done > 0:
-                event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                self._dirty_w, self._touched, *cell_args, w, hgt, h, self._scalars, self._real,
-                                periodic)
-            while True:
-                t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
-                # The circles' reaches are kept in _d1, the queues' scratch of heap times.
-                if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
-                                     self._d1, self._part_info, *cell_args, rows_per, parts, w, hgt, t0, t1 - t0,
-                                     vlim, self._link_allowance, periodic):
-                    break
-                if self._windows >= MOST_WINDOWS:
-                    self._split_wait = SPLIT_RETRY_STEPS
-                    return self._queue_step_whole(h, vlim, done == 0)  # from the circles' clocks, as they are
-                self._windows *= 2
-                done *= 2
-            log_count = int(self._counters.to_numpy()[1]) if record else 0
-            self._mark += 1  # saved[i] == mark: circle i's state at the window's start is in the backup
-            end = h
-            first = int(done == 0)
-            while True:
+        log_count = int(self._counters.to_numpy()[1]) if record else 0
+        end = h  # the step's end: h, or the time of a collision that would outrun the grid
+        while True:
+            reductions.fill_i32(self._touched, 0)
+            reductions.fill_i32(self._dirty_w, 0)
+            t0 = 0.0
+            done = 0  # windows of the step done, in the finest cut so far
+            cut = end
+            while t0 < end:
+                if done > 0:
+                    event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
+                                    self._dirty_w, self._touched, *cell_args, w, hgt, end, self._scalars, self._real,
+                                    periodic)
+                while True:
+                    t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
+                    # The circles' reaches are kept in _d1, the queues' scratch of heap times.
+                    if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
+                                         self._d1, self._part_info, *cell_args, rows_per, parts, w, hgt, t0,
+                                         min(t1, end) - t0, vlim, self._link_allowance, periodic):
+                        break
+                    if self._windows >= MOST_WINDOWS:
+                        self._split_wait = SPLIT_RETRY_STEPS
+                        # The rest of the step from one queue, from the circles' clocks as they are.
+                        cuts = self.cut_steps
+                        reached = self._queue_step_whole(end, vlim, done == 0)
+                        if end < h:
+                            self.cut_steps = cuts  # counted when the parts first met the cut
+                        return reached
+                    self._windows *= 2
+                    done *= 2
                 event.queue_parts(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
                                   self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
-                                  self.wall_impulse, self._touched, self._dirty_w, self._saved,
-                                  *(b[name] for name in BACKUP_ORDER), self._label, self._claimed, self._part_info,
-                                  self._part_result, *cell_args, rows_per, parts, w, hgt, end, min(t1, end), vlim,
-                                  self._time, self._mark, first, self._counters, self._log_t, self._log_i,
-                                  self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE, self._real, record,
-                                  periodic)
+                                  self.wall_impulse, self._touched, self._dirty_w,
+                                  *(b[name] for name in PARTS_BACKUP_ORDER), self._label, self._claimed,
+                                  self._part_info, self._part_result, *cell_args, rows_per, parts, w, hgt, end,
+                                  min(t1, end), vlim, self._time, int(done == 0), self._counters, self._log_t,
+                                  self._log_i, self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE,
+                                  self._real, record, periodic)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]
                 if np.any(reached == -2):
@@ -1294,28 +1297,19 @@ class Simulation:
                     raise RuntimeError(f"the earliest event of a part's queue was not its partner's at step time "
                                        f"{h} (internal error)")
                 cut = float(reached.min())
-                if cut >= end:
+                if cut < end:
                     break
-                # A collision at `cut` would outrun the grid: the step ends there. The window runs
-                # again from its start up to it, with every circle's events predicted anew (the
-                # window's parts still hold: a shorter window links fewer circles).
-                event.restore_saved(self._saved, self._mark, *(getattr(self, name) for name in BACKUP_ORDER),
-                                    *(b[name] for name in BACKUP_ORDER))
-                if record:
-                    self._set_counter(1, log_count)
-                reductions.fill_i32(self._touched, 1)
-                reductions.fill_i32(self._dirty_w, 1)
-                event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
-                                self._dirty_w, self._touched, *cell_args, w, hgt, cut, self._scalars, self._real,
-                                periodic)
-                end = cut
-                first = 0
-            if end < h:
-                h = end
-                self.cut_steps += 1
+                t0 = t1
+                done += 1
+            if cut >= end:
                 break
-            t0 = t1
-            done += 1
+            # A collision at `cut` would outrun the grid: the step ends there, and runs again
+            # from its start up to it (a redo may meet an earlier such collision: one cut step).
+            if end == h:
+                self.cut_steps += 1
+            self._restore(log_count)
+            end = cut
+        h = end
         self.rounds += 1
         self._known_speed = reductions.speed_from(
             event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._speed_out, self._real, periodic, self._serial,

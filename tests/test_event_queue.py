@@ -26,8 +26,8 @@ SCENES = {
                              precision="f64", mass="area"),
 }
 
-#: The parts' test also takes the steps cut short in float32 (the window's saved states, put back
-#: at a cut, are in the working precision: `event._save_first`, `event.restore_saved`), and
+#: The parts' test also takes the steps cut short in float32 (the step's saved states, put back
+#: at a cut, are in the working precision: `event.queue_parts`), and
 #: speeds from 0 up, where the split's reaches (`event._reach_of`) differ most from circle to
 #: circle: a slow circle by a border reaches far only when a fast one can hit it first.
 PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32"),
@@ -164,16 +164,19 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-radius", 4),
                                          ("periodic-f64-area", 4), ("walls-f32-slow-fast", 4),
+                                         ("walls-f64-radius", 16), ("walls-f32-radius", 16),
                                          ("walls-f32-equal", 10**9)],
-                         ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "no-split"])
+                         ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "cut-windows",
+                              "cut-windows-f32", "no-split"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     """Circles split into parts of about 200 (event.split_parts), each part's
     events run from its own queue, the parts shared among the threads (event.queue_parts):
     the state and the event log must equal the rounds' bit for bit. In the equal-mass scene
     the clusters of linked circles grow past what a split may claim (a quarter of the
     circles), so the steps run in windows; the radius-mass scene has steps cut short by a
-    collision that would outrun the grid (the window runs again up to it, the circles it
-    changed put back), in either precision; in the periodic box
+    collision that would outrun the grid (the step runs again from its start up to it, every
+    circle put back), in either precision, and with room for a sixteenth of the circles in the
+    claims, those cuts come in later windows too (asserted); in the periodic box
     the strips' borders wrap around (the last strip's is with the first). With room for no
     claims at all every split fails, and the steps fall back to one queue for all circles."""
     from circles import event, simulation
@@ -182,9 +185,25 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     on_threads(monkeypatch)
     monkeypatch.setattr(event, "PART_CIRCLES", 200)
     monkeypatch.setattr(simulation, "PART_CLAIMS", claims)
+    # The windows a step in parts had run when it met a cut (its restore).
+    runs_at_cuts = []
+    step_start = [0]
+    parts_step = simulation.Simulation._queue_parts_step
+    restore = simulation.Simulation._restore
+
+    def counted_step(self, *args):
+        step_start[0] = self.parts_run
+        return parts_step(self, *args)
+
+    def counted_restore(self, *args, **kwargs):
+        runs_at_cuts.append(self.parts_run - step_start[0])
+        return restore(self, *args, **kwargs)
+
+    monkeypatch.setattr(simulation.Simulation, "_queue_parts_step", counted_step)
+    monkeypatch.setattr(simulation.Simulation, "_restore", counted_restore)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim._part_shape()[0] >= 4
-    if claims == 4:
+    if claims in (4, 16):
         assert sim.parts_run >= sim.steps  # every step ran in parts, one window or more
     else:
         assert sim.parts_run == 0 and sim._windows == simulation.MOST_WINDOWS
@@ -194,6 +213,8 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     assert sim.cut_steps == rounds.cut_steps
     if name.endswith("-radius"):
         assert sim.cut_steps > 0
+    if claims == 16:
+        assert max(runs_at_cuts) > 1  # a cut met in a window after the first
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
