@@ -713,16 +713,19 @@ def begin_step(pos: ndarr, vel: ndarr, pair_count: ndarr, wall_count: ndarr, vir
     in full; with `serial`, on one thread (see backend.serial_loops)."""
     ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
-        pos_b[i] = pos[i]
-        vel_b[i] = vel[i]
-        pair_count_b[i] = pair_count[i]
-        wall_count_b[i] = wall_count[i]
-        virial_b[i] = virial[i]
-        wall_impulse_b[i] = wall_impulse[i]
+        copy_state(i, (pos, vel, pair_count, wall_count, virial, wall_impulse),
+                   (pos_b, vel_b, pair_count_b, wall_count_b, virial_b, wall_impulse_b))
         dirty[i] = 1
         moved[i] = 1
     scalars[0] = ti.cast(NEVER, real)
     scalars[1] = ti.cast(NEVER, real)
+
+
+@ti.func
+def copy_state(i, arrays: ti.template(), copies: ti.template()):
+    """Circle i's entries of each array in `arrays` into the array at the same place in `copies`."""
+    for a in ti.static(range(len(arrays))):
+        copies[a][i] = arrays[a][i]
 
 
 @ti.func
@@ -1615,12 +1618,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            b_pos[i] = pos[i]
-                            b_vel[i] = vel[i]
-                            b_pair_count[i] = pair_count[i]
-                            b_virial[i] = virial[i]
-                            b_wall_count[i] = wall_count[i]
-                            b_wall_impulse[i] = wall_impulse[i]
+                            copy_state(i, (pos, vel, pair_count, virial, wall_count, wall_impulse),
+                                       (b_pos, b_vel, b_pair_count, b_virial, b_wall_count, b_wall_impulse))
                             _first_wall_event(i, pos, vel, radius, STEP_START, ids, ev_t, ev_p, box, horizon, real,
                                               periodic)
                     for q in range(s_lo, items):
