@@ -4,7 +4,8 @@
 
 Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
 throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, memory.csv, spread.csv,
-peers.csv, work_precision.csv, results.md (every table, with the command and the date) and
+peers.csv, work_precision.csv, targets.csv, results.md (every table, with the command and the
+date, the project's performance targets first, judged on this run by `targets.py`) and
 work_precision.png. A run first removes these files from that folder, so that the folder never
 mixes two runs (a section skipped or failed leaves no file of an older run). The tables are
 rewritten after every section, so a run stopped early leaves what it measured. With --arch gpu
@@ -75,6 +76,7 @@ import taichi as ti
 import circles
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import targets  # noqa: E402
 try:
     import peer_pymunk  # noqa: E402
 except ImportError:  # no pymunk (a GPU machine, say): the peer section cannot run
@@ -118,7 +120,7 @@ GPU = dict(
 SECTIONS = ("throughput", "placement", "memory", "spread", "peers", "wp")
 #: The files a run writes into `<out>/<machine>/` (and removes there first).
 OUTPUT_FILES = ("bandwidth.csv", "throughput.csv", "placement.csv", "render.csv", "compile.csv", "peers.csv",
-                "work_precision.csv", "memory.csv", "spread.csv", "results.md", "work_precision.png")
+                "work_precision.csv", "memory.csv", "spread.csv", "targets.csv", "results.md", "work_precision.png")
 #: Default --out: the results kept with the project; QUICK_OUT for --quick or --skip runs.
 FULL_OUT = os.path.join("outputs", "bench")
 QUICK_OUT = os.path.join(tempfile.gettempdir(), "circles-bench-quick")
@@ -720,7 +722,7 @@ def plot_work_precision(rows, path):
 
 
 def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, render, peers, ratios, wp, errors,
-                   memory=(), spreads=()):
+                   memory=(), spreads=(), goals=()):
     lines = [f"# circles benchmark: {meta['machine_name']}", "",
              f"Command: `{meta['command']}`  ", f"Date: {meta['date']}  ", f"Engine: {meta['revision']}  ",
              f"Machine: {meta['machine_name']}{meta['cpu_details']}, {meta['cores']} cores; arch {meta['arch']}; "
@@ -735,6 +737,11 @@ def write_markdown(path, meta, compile_rows, bandwidth, throughput, placement, r
              "Scene of the throughput and peer rows: circles of radius "
              f"{R} at area fraction {AREA_FRACTION} in a 16:9 walled box, speeds uniform in {SPEED}, "
              "mass = radius, default dt (event: the fastest circle moves 0.3 mean radii per step; discrete: 0.2 smallest radii).", ""]
+    if goals:
+        lines += ["## Targets", "",
+                  "The project's performance targets judged on this run's tables (`bench/targets.py`: each on "
+                  "its median, f32; \"not measured\" where the run left out what it needs).", "",
+                  targets.markdown(goals), ""]
     lines += ["## Memory copy bandwidth", "",
               md_table(["method", "MB moved", "best GB/s", "median GB/s", "min GB/s"],
                        [[b["method"], b["mbytes"], b["gbps_best"], b["gbps_median"], b["gbps_min"]] for b in bandwidth]),
@@ -954,10 +961,15 @@ def main(argv=None):
         write_csv(os.path.join(outdir, "work_precision.csv"), wp)
         write_csv(os.path.join(outdir, "memory.csv"), memory)
         write_csv(os.path.join(outdir, "spread.csv"), spreads)
+        goals = targets.evaluate(dict(throughput=throughput, placement=placement, render=render, memory=memory,
+                                      spread=spreads, peers=peers + ratios), arch)
+        write_csv(os.path.join(outdir, "targets.csv"),
+                  [dict(target=t, measured=m, met=ok) for t, m, ok in goals])
         if wp and final:
             guarded("plot", plot_work_precision, wp, os.path.join(outdir, "work_precision.png"))
         write_markdown(os.path.join(outdir, "results.md"), meta, compile_rows, bandwidth, throughput, placement,
-                       render, peers, ratios, wp, errors, memory, spreads)
+                       render, peers, ratios, wp, errors, memory, spreads, goals)
+        return goals
 
     if "throughput" not in skip:
         log("throughput")
@@ -1056,7 +1068,10 @@ def main(argv=None):
         log("work-precision")
         wp.extend(guarded("work-precision", work_precision, cfg) or [])
 
-    save("work-precision", final=True)
+    goals = save("work-precision", final=True)
+    log("targets")
+    for target, measured, met in goals:
+        log(f"  {met:>12}: {target}: {measured}")
     log(f"done in {now() - start:.0f} s: {outdir}")
     return 1 if errors else 0
 
