@@ -8,6 +8,13 @@ Taichi's own call; microseconds per call, the median with [min, max] over `runs`
 least is the cost on a quiet machine, the spread what a shared one adds). Then the share of Taichi's
 launch alone (the C++ call that the fast path ends in), from the same calls timed without
 the Python around them.
+
+Last, what one more loop costs inside a kernel (each loop of a kernel is a task of its own, as
+each stage of a step is): a kernel of LOOPS + 1 loops over m items against one of a single
+loop, per further loop, with the loops run in parallel (each starts the CPU's thread pool) and
+with the loops serialized (on the calling thread), for m = 1, 1000 and 100000. The parallel
+start is what a stage pays for running on several threads (see circles.backend.SERIAL_N and
+circles.simulation.DISCRETE_PARALLEL_ROUNDS).
 """
 import argparse
 import statistics
@@ -16,7 +23,7 @@ import time
 import taichi as ti
 
 import circles
-from circles import launch
+from circles import backend, launch
 
 nd = ti.types.ndarray(ndim=1)
 
@@ -44,6 +51,56 @@ def per_call(fn, args, calls, runs):
             fn(*args)
         times.append((time.perf_counter() - t0) / calls * 1e6)
     return times
+
+
+#: Further loops of the kernels that time a loop's start.
+LOOPS = 31
+
+
+@ti.kernel
+def loops_parallel(a: nd, m: ti.i32):
+    for k in ti.static(range(LOOPS + 1)):
+        for i in range(m):
+            a[i] = a[i] * 0.5 + k
+
+
+@ti.kernel
+def loop_parallel(a: nd, m: ti.i32):
+    for i in range(m):
+        a[i] = a[i] * 0.5 + 1
+
+
+@ti.kernel
+def loops_serial(a: nd, m: ti.i32):
+    for k in ti.static(range(LOOPS + 1)):
+        ti.loop_config(serialize=True)
+        for i in range(m):
+            a[i] = a[i] * 0.5 + k
+
+
+@ti.kernel
+def loop_serial(a: nd, m: ti.i32):
+    ti.loop_config(serialize=True)
+    for i in range(m):
+        a[i] = a[i] * 0.5 + 1
+
+
+def loop_start(calls, runs):
+    """Microseconds per further loop of a kernel, parallel and serialized, by items per loop."""
+    a = ti.ndarray(ti.f32, shape=100_000)
+    rows = []
+    for m in (1, 1000, 100_000):
+        row = [m]
+        for many, one in ((loops_parallel, loop_parallel), (loops_serial, loop_serial)):
+            many(a, m)
+            one(a, m)
+            ti.sync()
+            # Each kernel returns nothing: the calls are timed up to a synchronisation.
+            many_us = per_call(lambda: (many(a, m), ti.sync()), (), calls, runs)
+            one_us = per_call(lambda: (one(a, m), ti.sync()), (), calls, runs)
+            row.append([(x - y) / LOOPS for x, y in zip(many_us, one_us)])
+        rows.append(row)
+    return rows
 
 
 def spread(times):
@@ -79,6 +136,11 @@ def main():
                                  args.runs)
             alone = f"   of which Taichi's launch alone {spread(launch_us)}"
         print(f"  {name:10s} fast call {spread(fast_us)}   Taichi's call {spread(plain_us)}{alone}")
+    calls = max(1, args.calls // 20)
+    print(f"microseconds per further loop of a kernel ({LOOPS} further loops against one), median [min, max] over "
+          f"{args.runs} runs of {calls} calls, on {backend.cpu_threads()} threads")
+    for m, parallel, serial in loop_start(calls, args.runs):
+        print(f"  {m:6d} items  parallel {spread(parallel)}   serialized {spread(serial)}")
 
 
 if __name__ == "__main__":
