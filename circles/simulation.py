@@ -49,10 +49,12 @@ DISCRETE_MAX_ROUNDS = 16
 #: empty loops each: on a CPU serial ones (see DISCRETE_PARALLEL_ROUNDS), about a microsecond each.
 DISCRETE_FUSED_ROUNDS = 8
 #: Rounds of a discrete step whose loops run in parallel on a CPU; later ones run on one thread.
-#: Starting a parallel loop on the CPU's thread pool costs some 15-25 microseconds even when it
-#: has nothing to do, while one thread takes 100-150 ns per listed circle. Round 3's list holds
-#: about 1% of the circles, round 5's about 0.02% (at 1e6: 10062 and 195), none by round 8. So
-#: four rounds run in parallel. A GPU runs every round in parallel.
+#: Starting a parallel loop on the CPU's thread pool costs some 15-25 microseconds (50-55 on
+#: another host, `bench/launch_cost.py`) even when it has nothing to do, while one thread takes
+#: 100-150 ns per listed circle. Round 3's list holds about 1% of the circles, round 5's about
+#: 0.02% (at 1e6: 10062 and 195), none by round 8. So four rounds run in parallel (fewer, or a
+#: number chosen from the lists, measured no better: bench/PERFORMANCE.md). A GPU runs every
+#: round in parallel.
 DISCRETE_PARALLEL_ROUNDS = 4
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
