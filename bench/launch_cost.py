@@ -58,31 +58,13 @@ LOOPS = 31
 
 
 @ti.kernel
-def loops_parallel(a: nd, m: ti.i32):
-    for k in ti.static(range(LOOPS + 1)):
+def loops(a: nd, m: ti.i32, count: ti.template(), serial: ti.template()):
+    """`count` loops over the first m items of a, each a task of its own: on the thread pool, or
+    with `serial` on the calling thread."""
+    for k in ti.static(range(count)):
+        ti.loop_config(serialize=serial)
         for i in range(m):
             a[i] = a[i] * 0.5 + k
-
-
-@ti.kernel
-def loop_parallel(a: nd, m: ti.i32):
-    for i in range(m):
-        a[i] = a[i] * 0.5 + 1
-
-
-@ti.kernel
-def loops_serial(a: nd, m: ti.i32):
-    for k in ti.static(range(LOOPS + 1)):
-        ti.loop_config(serialize=True)
-        for i in range(m):
-            a[i] = a[i] * 0.5 + k
-
-
-@ti.kernel
-def loop_serial(a: nd, m: ti.i32):
-    ti.loop_config(serialize=True)
-    for i in range(m):
-        a[i] = a[i] * 0.5 + 1
 
 
 def loop_start(calls, runs):
@@ -91,14 +73,14 @@ def loop_start(calls, runs):
     rows = []
     for m in (1, 1000, 100_000):
         row = [m]
-        for many, one in ((loops_parallel, loop_parallel), (loops_serial, loop_serial)):
-            many(a, m)
-            one(a, m)
-            ti.sync()
-            # Each kernel returns nothing: the calls are timed up to a synchronisation.
-            many_us = per_call(lambda: (many(a, m), ti.sync()), (), calls, runs)
-            one_us = per_call(lambda: (one(a, m), ti.sync()), (), calls, runs)
-            row.append([(x - y) / LOOPS for x, y in zip(many_us, one_us)])
+        for serial in (False, True):
+            timed = []
+            for count in (LOOPS + 1, 1):
+                loops(a, m, count, serial)  # compiles
+                ti.sync()
+                # The kernel returns nothing: each call is timed up to a synchronisation.
+                timed.append(per_call(lambda: (loops(a, m, count, serial), ti.sync()), (), calls, runs))
+            row.append([(x - y) / LOOPS for x, y in zip(*timed)])
         rows.append(row)
     return rows
 
