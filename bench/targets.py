@@ -71,6 +71,11 @@ def _median_range(row, stem, fmt=_si):
             f"{fmt(_num(row, stem + '_max'))}]")
 
 
+def _power(n):
+    """1e4 for 10000."""
+    return f"{n:.0e}".replace("e+0", "e").replace("e+", "e")
+
+
 def _seconds(v):
     return f"{v:.3g} s"
 
@@ -86,32 +91,33 @@ def _throughput_row(tables, n, scheme):
     return None
 
 
-def _cpu_targets(tables):
-    rows = []
+def _discrete_1e6(tables):
     d = _throughput_row(tables, 1_000_000, "discrete")
-    rows.append(("discrete, 1e6 f32: 40 M circle-steps/s",
-                 _median_range(d, "circle_steps_per_s") if d else NOT_MEASURED,
-                 _met(_num(d, "circle_steps_per_s_median") >= DISCRETE_1E6) if d else NOT_MEASURED))
+    if d:
+        return _median_range(d, "circle_steps_per_s"), _met(_num(d, "circle_steps_per_s_median") >= DISCRETE_1E6)
+    return None
+
+
+def _event_1e6(tables):
     e = _throughput_row(tables, 1_000_000, "event")
     if e:
         speed, collisions = _num(e, "circle_steps_per_s_median"), _num(e, "pair_collisions_per_s")
-        rows.append(("event, 1e6 f32: 15 M circle-steps/s and 5 M collisions/s",
-                     f"{_median_range(e, 'circle_steps_per_s')} and {collisions / 1e6:.3g} M collisions/s",
-                     _met(speed >= EVENT_1E6 and collisions >= EVENT_COLLISIONS_1E6)))
-    else:
-        rows.append(("event, 1e6 f32: 15 M circle-steps/s and 5 M collisions/s", NOT_MEASURED, NOT_MEASURED))
+        return (f"{_median_range(e, 'circle_steps_per_s')} and {collisions / 1e6:.3g} M collisions/s",
+                _met(speed >= EVENT_1E6 and collisions >= EVENT_COLLISIONS_1E6))
+    return None
 
+
+def _peer(tables):
     ratios = [r for r in tables.get("peers") or ()
               if r.get("scheme") and r["precision"] == PRECISION and int(_num(r, "n")) == PEER_N]
-    if ratios:
-        best = max(ratios, key=lambda r: _num(r, "circle_steps_ratio"))
-        measured = "; ".join(f"{r['scheme']} {_num(r, 'circle_steps_ratio'):.3g} times "
-                             f"[{_num(r, 'ratio_min'):.3g}, {_num(r, 'ratio_max'):.3g}]" for r in ratios)
-        rows.append(("1e5 f32: 30 times pymunk's circle-steps/s, side by side", measured,
-                     _met(_num(best, "circle_steps_ratio") >= PEER_RATIO)))
-    else:
-        rows.append(("1e5 f32: 30 times pymunk's circle-steps/s, side by side", NOT_MEASURED, NOT_MEASURED))
+    if not ratios:
+        return None
+    measured = "; ".join(f"{r['scheme']} {_num(r, 'circle_steps_ratio'):.3g} times "
+                         f"[{_num(r, 'ratio_min'):.3g}, {_num(r, 'ratio_max'):.3g}]" for r in ratios)
+    return measured, _met(max(_num(r, "circle_steps_ratio") for r in ratios) >= PEER_RATIO)
 
+
+def _flatness(tables):
     parts, verdicts = [], []
     for scheme in ("discrete", "event"):
         found = [_throughput_row(tables, n, scheme) for n in FLAT_SIZES]
@@ -123,71 +129,83 @@ def _cpu_targets(tables):
         dearest = min(speeds, key=speeds.get)
         cheapest = max(speeds, key=speeds.get)
         ratio = speeds[cheapest] / speeds[dearest]
-        parts.append(f"{scheme} {ratio:.2f} ({dearest:.0e} against {cheapest:.0e})".replace("e+0", "e"))
+        parts.append(f"{scheme} {ratio:.2f} ({_power(dearest)} against {_power(cheapest)})")
         verdicts.append(ratio <= FLATNESS)
-    rows.append(("cost per circle-step flat within 1.5 times from 1e4 to 1e6", "; ".join(parts),
-                 NOT_MEASURED if None in verdicts else _met(all(verdicts))))
+    if verdicts == [None, None]:
+        return None
+    return "; ".join(parts), NOT_MEASURED if None in verdicts else _met(all(verdicts))
 
-    placed = {}
-    for row in tables.get("placement") or ():
-        if int(_num(row, "n")) == PLACEMENT_N:
-            placed[float(row["area_fraction"])] = row
-    if all(f in placed for f, _ in PLACEMENT_S):
-        measured = "; ".join(f"{_median_range(placed[f], 'place_s', _seconds)} at {f}" for f, _ in PLACEMENT_S)
-        ok = all(_num(placed[f], "place_s_median") < limit for f, limit in PLACEMENT_S)
-        rows.append(("placement of 1e6: 3 s at area fraction 0.5, 20 s at 0.8", measured, _met(ok)))
-    else:
-        rows.append(("placement of 1e6: 3 s at area fraction 0.5, 20 s at 0.8", NOT_MEASURED, NOT_MEASURED))
 
+def _placement(tables):
+    placed = {float(r["area_fraction"]): r for r in tables.get("placement") or () if int(_num(r, "n")) == PLACEMENT_N}
+    if not all(f in placed for f, _ in PLACEMENT_S):
+        return None
+    measured = "; ".join(f"{_median_range(placed[f], 'place_s', _seconds)} at {f}" for f, _ in PLACEMENT_S)
+    return measured, _met(all(_num(placed[f], "place_s_median") < limit for f, limit in PLACEMENT_S))
+
+
+def _render(tables):
     frames = [r for r in tables.get("render") or () if int(_num(r, "n")) == RENDER_N]
-    rows.append(("a 1920x1080 frame of 1e6 circles in 0.1 s",
-                 _median_range(frames[0], "frame_s", _seconds) if frames else NOT_MEASURED,
-                 _met(_num(frames[0], "frame_s_median") < RENDER_S) if frames else NOT_MEASURED))
+    if frames:
+        return _median_range(frames[0], "frame_s", _seconds), _met(_num(frames[0], "frame_s_median") < RENDER_S)
+    return None
 
+
+def _memory(tables):
     memory = [r for r in tables.get("memory") or () if r["precision"] == PRECISION]
-    if memory:
-        largest = max(int(_num(r, "n")) for r in memory)
-        at_largest = [r for r in memory if int(_num(r, "n")) == largest]
-        measured = "; ".join(f"{r['scheme']}: arrays {_num(r, 'array_bytes_per_circle'):.0f} B, peak at "
-                             f"{largest:.0e} {_num(r, 'bytes_per_circle'):.0f} B".replace("e+0", "e")
-                             for r in at_largest)
-        ok = all(_num(r, "array_bytes_per_circle") <= BYTES_PER_CIRCLE and _num(r, "bytes_per_circle")
-                 <= BYTES_PER_CIRCLE for r in at_largest)
-        rows.append(("200 bytes per circle, f32", measured, _met(ok)))
-    else:
-        rows.append(("200 bytes per circle, f32", NOT_MEASURED, NOT_MEASURED))
+    if not memory:
+        return None
+    largest = max(int(_num(r, "n")) for r in memory)
+    at_largest = [r for r in memory if int(_num(r, "n")) == largest]
+    measured = "; ".join(f"{r['scheme']}: arrays {_num(r, 'array_bytes_per_circle'):.0f} B, peak at "
+                         f"{_power(largest)} {_num(r, 'bytes_per_circle'):.0f} B" for r in at_largest)
+    return measured, _met(all(max(_num(r, "array_bytes_per_circle"), _num(r, "bytes_per_circle"))
+                              <= BYTES_PER_CIRCLE for r in at_largest))
 
+
+def _spread(tables):
     spreads = tables.get("spread") or ()
-    if spreads:
-        measured = "; ".join(f"{r['scheme']} {_num(r, 'cost_ratio'):.3g} at {int(_num(r, 'n')):.0e}".replace("e+0", "e")
-                             for r in spreads)
-        rows.append(("1% of the circles 50 times larger: at most 3 times the equal-radii cost", measured,
-                     _met(all(_num(r, "cost_ratio") <= SPREAD_COST for r in spreads))))
-    else:
-        rows.append(("1% of the circles 50 times larger: at most 3 times the equal-radii cost", NOT_MEASURED,
-                     NOT_MEASURED))
-    return rows
+    if not spreads:
+        return None
+    measured = "; ".join(f"{r['scheme']} {_num(r, 'cost_ratio'):.3g} at {_power(int(_num(r, 'n')))}" for r in spreads)
+    return measured, _met(all(_num(r, "cost_ratio") <= SPREAD_COST for r in spreads))
 
 
-def _gpu_targets(tables):
+def _gpu(tables):
     d = _throughput_row(tables, GPU_N, "discrete")
     e = _throughput_row(tables, GPU_N, "event")
     largest = _throughput_row(tables, GPU_LARGEST_N, "discrete")
+    if not (d or e or largest):
+        return None
     parts = [f"discrete {_median_range(d, 'circle_steps_per_s')}" if d else f"discrete {NOT_MEASURED}",
              f"event {_median_range(e, 'circle_steps_per_s')}" if e else f"event {NOT_MEASURED}",
              f"1e8: discrete {_median_range(largest, 'circle_steps_per_s')}" if largest else f"1e8 {NOT_MEASURED}"]
+    met = NOT_MEASURED
     if d and e and largest:
         met = _met(_num(d, "circle_steps_per_s_median") >= GPU_DISCRETE
                    and _num(e, "circle_steps_per_s_median") >= GPU_EVENT)
-    else:
-        met = NOT_MEASURED
-    return [("one GPU: discrete 5 G and event 1 G circle-steps/s at 1e7; 1e8 runs", "; ".join(parts), met)]
+    return "; ".join(parts), met
+
+
+#: (target, judge): judge(tables) gives (measured, met), or None where the run measured nothing of it.
+CPU_TARGETS = (
+    ("discrete, 1e6 f32: 40 M circle-steps/s", _discrete_1e6),
+    ("event, 1e6 f32: 15 M circle-steps/s and 5 M collisions/s", _event_1e6),
+    ("1e5 f32: 30 times pymunk's circle-steps/s, side by side", _peer),
+    ("cost per circle-step flat within 1.5 times from 1e4 to 1e6", _flatness),
+    ("placement of 1e6: 3 s at area fraction 0.5, 20 s at 0.8", _placement),
+    ("a 1920x1080 frame of 1e6 circles in 0.1 s", _render),
+    ("200 bytes per circle, f32", _memory),
+    ("1% of the circles 50 times larger: at most 3 times the equal-radii cost", _spread),
+)
+GPU_TARGETS = (("one GPU: discrete 5 G and event 1 G circle-steps/s at 1e7; 1e8 runs", _gpu),)
 
 
 def evaluate(tables, arch="cpu"):
     """[(target, measured, met)] for the run whose tables (a dict: TABLES' names to lists of rows)
     `tables` holds; `arch` "cpu" judges the CPU targets, "gpu" the GPU's."""
-    return _gpu_targets(tables) if arch == "gpu" else _cpu_targets(tables)
+    return [(target, *(judge(tables) or (NOT_MEASURED, NOT_MEASURED)))
+            for target, judge in (GPU_TARGETS if arch == "gpu" else CPU_TARGETS)]
 
 
 def markdown(rows):
