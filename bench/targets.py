@@ -30,6 +30,8 @@ import sys
 
 #: The throughput rows the targets read: float32 throughout.
 PRECISION = "f32"
+#: The N of the speed targets on a CPU.
+SPEED_N = 1_000_000
 DISCRETE_1E6 = 40e6
 EVENT_1E6 = 15e6
 EVENT_COLLISIONS_1E6 = 5e6
@@ -92,14 +94,14 @@ def _throughput_row(tables, n, scheme):
 
 
 def _discrete_1e6(tables):
-    d = _throughput_row(tables, 1_000_000, "discrete")
+    d = _throughput_row(tables, SPEED_N, "discrete")
     if d:
         return _median_range(d, "circle_steps_per_s"), _met(_num(d, "circle_steps_per_s_median") >= DISCRETE_1E6)
     return None
 
 
 def _event_1e6(tables):
-    e = _throughput_row(tables, 1_000_000, "event")
+    e = _throughput_row(tables, SPEED_N, "event")
     if e:
         speed, collisions = _num(e, "circle_steps_per_s_median"), _num(e, "pair_collisions_per_s")
         return (f"{_median_range(e, 'circle_steps_per_s')} and {collisions / 1e6:.3g} M collisions/s",
@@ -224,7 +226,7 @@ def read_run(folder):
         if os.path.isfile(path):
             with open(path, newline="") as f:
                 tables[name] = list(csv.DictReader(f))
-    sizes = [int(float(r["n"])) for r in tables.get("throughput") or ()]
+    sizes = [int(_num(r, "n")) for r in tables.get("throughput") or ()]
     return tables, ("gpu" if sizes and max(sizes) >= GPU_N else "cpu")
 
 
