@@ -118,6 +118,8 @@ def main():
                                  args.runs)
             alone = f"   of which Taichi's launch alone {spread(launch_us)}"
         print(f"  {name:10s} fast call {spread(fast_us)}   Taichi's call {spread(plain_us)}{alone}")
+    # A call of the kernel of LOOPS + 1 parallel loops takes a few milliseconds where a loop's start
+    # costs tens of microseconds: a twentieth of the calls keeps this section to seconds.
     calls = max(1, args.calls // 20)
     print(f"microseconds per further loop of a kernel ({LOOPS} further loops against one), median [min, max] over "
           f"{args.runs} runs of {calls} calls, on {backend.cpu_threads()} threads")

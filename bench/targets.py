@@ -139,7 +139,7 @@ def _flatness(tables):
 
 
 def _placement(tables):
-    placed = {float(r["area_fraction"]): r for r in tables.get("placement") or () if int(_num(r, "n")) == PLACEMENT_N}
+    placed = {_num(r, "area_fraction"): r for r in tables.get("placement") or () if int(_num(r, "n")) == PLACEMENT_N}
     if not all(f in placed for f, _ in PLACEMENT_S):
         return None
     measured = "; ".join(f"{_median_range(placed[f], 'place_s', _seconds)} at {f}" for f, _ in PLACEMENT_S)
