@@ -15,6 +15,11 @@ thread first lists its part's marked circles, `_first_round_in_parts`), later ro
 visit only the circles listed as overlapping a resolved one, and the walls only the circles
 the move left reaching past a wall.
 
+On a CPU with several threads the step runs as one team (`team_step`, `circles.team`): the
+same stages in one parallel loop, each cut into chunks that the threads take, with one start
+of the thread pool a step instead of one per loop (a dozen or more, each as long as a step of
+tens of thousands of circles on some hosts).
+
 Radius spread: cells as wide as the largest diameter would hold hundreds of small circles
 when a few circles are much larger. In a walled box with a few large circles (see
 simulation.LARGE_RADIUS_RATIO) the grid has two levels: cells sized for the small circles,
@@ -31,7 +36,10 @@ import taichi as ti
 from . import launch
 from .geometry import (NEVER, displacement, forward_fits, forward_range, neighbour_range, pairs_once, run_parts,
                        wide_row)
-from .grid import PART_ITERATIONS, _part_range, count_parts, enter_cells, finish_cells
+from .grid import (CPU_GROUP, PART_ITERATIONS, _part_range, _scan_shape, chunk_ends, chunk_starts, chunk_total,
+                   count_part, count_parts, count_strays, enter_cells, finish_cells, owned_starts, scatter_group)
+from .geometry import cells_in
+from .team import STAGES, chunks_of, clear, loop_iterations, member_of, span, stage, value_slot
 
 ndarr = ti.types.ndarray(ndim=1)
 
@@ -252,55 +260,76 @@ def _scan_contacts(pos: ti.template(), vel: ti.template(), radius: ti.template()
 
     Two-level grid (`wide_row`): the pairs of two small circles as above, and every pair with
     a large circle from the large circle's block (a pair of two large ones from its lower slot)."""
-    forward = forward_fits(ncx, ncy, periodic)
     work[ROUND] += 1
     work[LIST0] = 0
     work[LIST1] = 0
     ti.loop_config(serialize=serial)
     for own in range(pos.shape[0]):
-        box = ti.Vector([box_w, box_h], dt=real)
-        # In slot order: the circle's own slot is the loop index, and its forward slots follow.
-        rnd = work[ROUND]
-        i = sorted_ids[own]
-        c = cell_of[i]
-        if ti.static(not periodic):
-            # Two runs of slots (`forward_range`) walked as one loop: one exit branch, not two.
-            a_hi = cell_start[c + 2]
-            b_lo, b_hi = forward_range(1, c, 0, 0, own, cell_start, ncx, ncy, periodic)
-            n_a = a_hi - own - 1
-            count = n_a + b_hi - b_lo
-            if is_large(i, radius, spread, two_level):
-                count = 0  # no forward search: its pairs come from its block, below
-            # i's own values read once (a walled box: no images), each neighbour's straight
-            # from its slot, with no min and max of the two before the loads.
-            xi = pos[i]
-            ri = per_circle(i, radius, uniform)
-            for m in range(count):
-                k = own + 1 + m if m < n_a else b_lo + m - n_a
-                j = sorted_ids[k]
-                if not is_large(j, radius, spread, two_level):
-                    d = pos[j] - xi
-                    s = ri + per_circle(j, radius, uniform)
-                    if d.dot(d) < s * s:
-                        _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
-        else:
-            pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
-                       (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform))
+        _scan_slot(own, pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start, sorted_ids, ncx,
+                   ncy, rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform)
     if ti.static(two_level):
         ti.loop_config(serialize=serial)
         for a in range(work[NLARGE]):
-            box = ti.Vector([box_w, box_h], dt=real)
-            rnd = work[ROUND]
-            i = large[a]
-            c = cell_of[i]
-            kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
-            for r in range(runs):
-                k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
-                for k in range(k_lo, k_hi):
-                    j = sorted_ids[k]
-                    if j != i and (j > i or not is_large(j, radius, spread, two_level)):
-                        _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic,
-                                        uniform)
+            _scan_large(a, pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start, sorted_ids, ncx,
+                        ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, uniform)
+
+
+@ti.func
+def _scan_slot(own, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
+               n_contacts: ti.template(), marked: ti.template(), work: ti.template(), cell_of: ti.template(),
+               cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+               spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+               uniform: ti.template()):
+    """`_scan_contacts` of the circle in slot `own`: its pairs with the forward half of its cells."""
+    forward = forward_fits(ncx, ncy, periodic)
+    box = ti.Vector([box_w, box_h], dt=real)
+    # In slot order: the circle's own slot is the loop index, and its forward slots follow.
+    rnd = work[ROUND]
+    i = sorted_ids[own]
+    c = cell_of[i]
+    if ti.static(not periodic):
+        # Two runs of slots (`forward_range`) walked as one loop: one exit branch, not two.
+        a_hi = cell_start[c + 2]
+        b_lo, b_hi = forward_range(1, c, 0, 0, own, cell_start, ncx, ncy, periodic)
+        n_a = a_hi - own - 1
+        count = n_a + b_hi - b_lo
+        if is_large(i, radius, spread, two_level):
+            count = 0  # no forward search: its pairs come from its block, below
+        # i's own values read once (a walled box: no images), each neighbour's straight
+        # from its slot, with no min and max of the two before the loads.
+        xi = pos[i]
+        ri = per_circle(i, radius, uniform)
+        for m in range(count):
+            k = own + 1 + m if m < n_a else b_lo + m - n_a
+            j = sorted_ids[k]
+            if not is_large(j, radius, spread, two_level):
+                d = pos[j] - xi
+                s = ri + per_circle(j, radius, uniform)
+                if d.dot(d) < s * s:
+                    _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
+    else:
+        pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
+                   (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform))
+
+
+@ti.func
+def _scan_large(a, pos: ti.template(), vel: ti.template(), radius: ti.template(), contacts: ti.template(),
+                n_contacts: ti.template(), marked: ti.template(), work: ti.template(), cell_of: ti.template(),
+                cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+                spread: ti.template(), large: ti.template(), real: ti.template(), periodic: ti.template(),
+                two_level: ti.template(), uniform: ti.template()):
+    """`_scan_contacts` of large circle `a` of a two-level grid: its pairs from its block."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    rnd = work[ROUND]
+    i = large[a]
+    c = cell_of[i]
+    kx, ky, runs = _search_runs(i, radius, spread, box, ncx, ncy, rows, segs, two_level)
+    for r in range(runs):
+        k_lo, k_hi = _search_run(c, r, kx, ky, cell_start, ncx, ncy, segs, periodic, two_level)
+        for k in range(k_lo, k_hi):
+            j = sorted_ids[k]
+            if j != i and (j > i or not is_large(j, radius, spread, two_level)):
+                _record_contact(i, j, pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform)
 
 
 @ti.func
@@ -394,21 +423,34 @@ def _pick(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mas
     """
     ti.loop_config(serialize=serial)
     for a in range(_round_items(work, side, pos.shape[0], every)):
-        box = ti.Vector([box_w, box_h], dt=real)
-        i, take = _listed(a, work[ROUND], marked, lists, side, every)
-        if take:
-            best_p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
-                               cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level,
-                               uniform)
-            # In the first round a circle that picked no partner (one of an isolated pair, or
-            # one with no approaching overlap: most of them) writes nothing. That round's resolve
-            # takes only circles whose `picked` is the round, and no circle picks it then. A
-            # later round can pick it only after a resolution changed its velocity (which
-            # writes its pick) or that of a circle it overlaps (which lists it to pick again).
-            # Half the stores of the pass, and the resolve reads no partner it does not use.
-            if not ti.static(every) or best_p >= 0:
-                partner[i] = best_p
-                picked[i] = work[ROUND]
+        _pick_item(a, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts, n_contacts,
+                   lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, real,
+                   periodic, two_level, uniform, side, marked, every)
+
+
+@ti.func
+def _pick_item(a, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+               ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+               virial: ti.template(), contacts: ti.template(), n_contacts: ti.template(), lists: ti.template(),
+               work: ti.template(), cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx,
+               ncy, rows, segs, box_w, box_h, spread: ti.template(), real: ti.template(), periodic: ti.template(),
+               two_level: ti.template(), uniform: ti.template(), side, marked: ti.template(), every: ti.template()):
+    """Item a of `_pick`'s loop."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    i, take = _listed(a, work[ROUND], marked, lists, side, every)
+    if take:
+        best_p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
+                           cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level,
+                           uniform)
+        # In the first round a circle that picked no partner (one of an isolated pair, or
+        # one with no approaching overlap: most of them) writes nothing. That round's resolve
+        # takes only circles whose `picked` is the round, and no circle picks it then. A
+        # later round can pick it only after a resolution changed its velocity (which
+        # writes its pick) or that of a circle it overlaps (which lists it to pick again).
+        # Half the stores of the pass, and the resolve reads no partner it does not use.
+        if not ti.static(every) or best_p >= 0:
+            partner[i] = best_p
+            picked[i] = work[ROUND]
 
 
 @ti.func
@@ -533,42 +575,63 @@ def _first_round_in_parts(pos: ti.template(), vel: ti.template(), radius: ti.tem
     them); then each part resolves its kept ones (`_resolve_one`). The same picks and the same
     resolutions as `_pick` and `_resolve` over every circle, which took each circle's mark
     through a branch."""
-    np_ = ti.static(count_parts())
-    n = pos.shape[0]
-    for it in range(np_ * PART_ITERATIONS):
+    args = ti.static((pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                      n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                      spread, real, periodic, two_level, uniform))
+    for it in range(ti.static(count_parts()) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
-            box = ti.Vector([box_w, box_h], dt=real)
-            k = it // PART_ITERATIONS
-            lo, hi = _part_range(n, k, np_)
-            rnd = work[ROUND]
-            m = lo
-            for a in range(lo, hi):
-                lists[0, m] = a
-                m += ti.select(marked[a] == rnd, 1, 0)
-            kept = lo
-            for q in range(lo, m):
-                i = lists[0, q]
-                p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
-                              cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level,
-                              uniform)
-                if p >= 0:
-                    partner[i] = p
-                    picked[i] = rnd
-                    lists[0, kept] = i
-                    kept += 1
-            work[PART_PICKS + k] = kept - lo
-    for it in range(np_ * PART_ITERATIONS):
+            _first_pick_part(it // PART_ITERATIONS, *args)
+    for it in range(ti.static(count_parts()) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
-            box = ti.Vector([box_w, box_h], dt=real)
-            k = it // PART_ITERATIONS
-            lo = _part_range(n, k, np_)[0]
-            rnd = work[ROUND]
-            for q in range(lo, lo + work[PART_PICKS + k]):
-                _resolve_one(lists[0, q], rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial,
-                             marked, contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy,
-                             rows, segs, box, spread, real, periodic, two_level, uniform, 0)
+            _first_resolve_part(it // PART_ITERATIONS, *args)
     work[ROUND] += 1
     work[LIST0] = 0
+
+
+@ti.func
+def _first_pick_part(k, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                     ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+                     virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+                     lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+                     sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
+                     real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template()):
+    """The picks of part k of `_first_round_in_parts`."""
+    lo, hi = _part_range(pos.shape[0], k, ti.static(count_parts()))
+    rnd = work[ROUND]
+    m = lo
+    for a in range(lo, hi):
+        lists[0, m] = a
+        m += ti.select(marked[a] == rnd, 1, 0)
+    kept = lo
+    for q in range(lo, m):
+        box = ti.Vector([box_w, box_h], dt=real)  # built in the loop (tests/test_gpu_rules.py)
+        i = lists[0, q]
+        p = _pick_one(i, pos, vel, radius, inv_mass, ids, pair_count, virial, contacts, n_contacts, cell_of,
+                      cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real, periodic, two_level, uniform)
+        if p >= 0:
+            partner[i] = p
+            picked[i] = rnd
+            lists[0, kept] = i
+            kept += 1
+    work[PART_PICKS + k] = kept - lo
+
+
+@ti.func
+def _first_resolve_part(k, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                        ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+                        virial: ti.template(), marked: ti.template(), contacts: ti.template(),
+                        n_contacts: ti.template(), lists: ti.template(), work: ti.template(), cell_of: ti.template(),
+                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
+                        spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+                        uniform: ti.template()):
+    """The resolutions of part k of `_first_round_in_parts` (after every part's picks)."""
+    lo = _part_range(pos.shape[0], k, ti.static(count_parts()))[0]
+    rnd = work[ROUND]
+    for q in range(lo, lo + work[PART_PICKS + k]):
+        box = ti.Vector([box_w, box_h], dt=real)  # built in the loop (tests/test_gpu_rules.py)
+        _resolve_one(lists[0, q], rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked,
+                     contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box,
+                     spread, real, periodic, two_level, uniform, 0)
 
 
 @ti.func
@@ -584,16 +647,30 @@ def _resolve(pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_
     entry); this round's list is emptied after."""
     ti.loop_config(serialize=serial)
     for a in range(_round_items(work, side, pos.shape[0], every)):
-        box = ti.Vector([box_w, box_h], dt=real)
-        rnd = work[ROUND]
-        i, take = _listed(a, rnd, picked, lists, side, every)
-        if take:
-            _resolve_one(i, rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked,
-                         contacts, n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs,
-                         box, spread, real, periodic, two_level, uniform, side)
+        _resolve_item(a, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                      n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                      spread, real, periodic, two_level, uniform, side, every)
     # One serial statement group between rounds (each group is a task of its own).
     work[ROUND] += 1
     work[LIST0 + side] = 0
+
+
+@ti.func
+def _resolve_item(a, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
+                  ids: ti.template(), partner: ti.template(), picked: ti.template(), pair_count: ti.template(),
+                  virial: ti.template(), marked: ti.template(), contacts: ti.template(), n_contacts: ti.template(),
+                  lists: ti.template(), work: ti.template(), cell_of: ti.template(), cell_start: ti.template(),
+                  sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h, spread: ti.template(),
+                  real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(), side,
+                  every: ti.template()):
+    """Item a of `_resolve`'s loop."""
+    box = ti.Vector([box_w, box_h], dt=real)
+    rnd = work[ROUND]
+    i, take = _listed(a, rnd, picked, lists, side, every)
+    if take:
+        _resolve_one(i, rnd, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                     n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box, spread, real,
+                     periodic, two_level, uniform, side)
 
 
 @ti.func
@@ -769,3 +846,178 @@ def list_large(radius: ndarr, r_cut: ti.f64, large: ndarr, work: ndarr):
     for i in range(radius.shape[0]):
         if ti.cast(radius[i], ti.f64) > r_cut:
             large[ti.atomic_add(work[NLARGE], 1)] = i
+
+
+#: Items per chunk of a team step's stages (`team_step`): slots of the overlap search and the
+#: scatter, and entries of a round's work list or of the walls' list.
+TEAM_SLOTS = 2048
+TEAM_LIST = 64
+
+
+@ti.func
+def _team_move(c, a: ti.template()):
+    count_part(c, a[0][0].shape[0], _moved, _keep_moved, *a)
+
+
+@ti.func
+def _team_strays(c, a: ti.template()):
+    count_strays(a[0].shape[0], *a)
+
+
+@ti.func
+def _team_totals(c, a: ti.template()):
+    chunk_total(c, *a)
+
+
+@ti.func
+def _team_ends(c, a: ti.template()):
+    chunk_ends(*a)
+    a[0][0] = 0
+
+
+@ti.func
+def _team_starts(c, a: ti.template()):
+    chunk_starts(c, *a)
+
+
+@ti.func
+def _team_scatter(c, a: ti.template()):
+    g = ti.static(CPU_GROUP)
+    lo, hi = span(c, chunks_of(a[0].shape[0], g), TEAM_SLOTS // g)
+    for q in range(lo, hi):
+        scatter_group(q, *a)
+
+
+@ti.func
+def _team_scan(c, a: ti.template()):
+    lo, hi = span(c, a[0].shape[0], TEAM_SLOTS)
+    for own in range(lo, hi):
+        _scan_slot(own, *a)
+
+
+@ti.func
+def _team_scan_large(c, a: ti.template()):
+    lo, hi = span(c, a[6][NLARGE], TEAM_LIST)
+    for k in range(lo, hi):
+        _scan_large(k, *a)
+
+
+@ti.func
+def _team_first_pick(c, a: ti.template()):
+    _first_pick_part(c, *a)
+
+
+@ti.func
+def _team_first_resolve(c, a: ti.template()):
+    _first_resolve_part(c, *a)
+
+
+@ti.func
+def _team_pick(c, a: ti.template()):
+    lo, hi = span(c, a[0], TEAM_LIST)
+    for q in range(lo, hi):
+        _pick_item(q, *a[1:])
+
+
+@ti.func
+def _team_resolve(c, a: ti.template()):
+    lo, hi = span(c, a[0], TEAM_LIST)
+    for q in range(lo, hi):
+        _resolve_item(q, *a[1:])
+
+
+@ti.func
+def _team_next_round(c, a: ti.template()):
+    """The statements between rounds (`_resolve`'s last), and the length of the next round's
+    list kept in the team's values for its stages' counts (the list's own counter changes
+    within the next round)."""
+    work, sync, side, r = ti.static(a)
+    work[ROUND] += 1
+    work[LIST0 + side] = 0
+    sync[value_slot(r + 1)] = work[LIST0 + 1 - side]
+
+
+@ti.func
+def _team_walls(c, a: ti.template()):
+    walled, work, pos, vel, radius, inv_mass, wall_count, wall_impulse, box_w, box_h, real, uniform = ti.static(a)
+    lo, hi = span(c, work[WALLED], TEAM_LIST)
+    if work[LIST0] == 0:  # the rounds settled
+        for k in range(lo, hi):
+            box = ti.Vector([box_w, box_h], dt=real)
+            _wall(walled[k], pos, vel, radius, inv_mass, wall_count, wall_impulse, box, uniform)
+
+
+@launch.kernel
+def team_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr, partner: ndarr, picked: ndarr,
+              marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
+              lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
+              wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
+              sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
+              segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
+              sync: ndarr, real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+              uniform: ti.template(), rounds: ti.template(), serial: ti.template()) -> ti.i32:
+    """`begin_step` on a CPU's threads as one team (`circles.team`): the same stages, the same
+    state bit for bit, with one start of the thread pool instead of one per loop. The first
+    round runs in parts (`_first_round_in_parts`), the later `rounds` - 1 in chunks of their
+    lists. `sync`: the team's counters (team.sync_slots()). With `serial` the team's loop runs on the
+    calling thread, its members one after another (the first does every chunk, the others find
+    them done): for tests of that claim of `circles.team`."""
+    ti.static_assert(11 + 3 * rounds <= STAGES)
+    n = pos.shape[0]
+    ncells = cells_in(ncx, ncy, periodic)
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        clear(sync)
+        work[WALLED] = 0
+        # As `_scan_contacts` begins.
+        work[ROUND] += 1
+        work[LIST0] = 0
+        work[LIST1] = 0
+        owned_starts(n, cell_of, parts, ncx, ncy, periodic)
+    ti.loop_config(serialize=serial)
+    for it in range(ti.static(loop_iterations())):
+        me = member_of(it)
+        if me >= 0:
+            np_ = ti.static(count_parts())
+            moved = ti.static((pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real,
+                               periodic, uniform))
+            stage(sync, 0, np_, _team_move, (moved, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
+                                             inv_ch, real, periodic), me)
+            stage(sync, 1, 1, _team_strays, (cell_of, slot, cell_count, sorted_ids, parts), me)
+            nchunks = chunks_of(ncells, ti.static(_scan_shape()[0]))
+            stage(sync, 2, nchunks, _team_totals, (cell_count, cell_start, ncells), me)
+            stage(sync, 3, 1, _team_ends, (cell_start, ncells), me)
+            stage(sync, 4, nchunks, _team_starts, (cell_count, cell_start, ncells), me)
+            stage(sync, 5, chunks_of(n, TEAM_SLOTS), _team_scatter, (cell_of, slot, cell_start, sorted_ids), me)
+            stage(sync, 6, chunks_of(n, TEAM_SLOTS), _team_scan,
+                  (pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start, sorted_ids, ncx, ncy,
+                   rows, segs, box_w, box_h, spread, real, periodic, two_level, uniform), me)
+            if ti.static(two_level):
+                stage(sync, 7, chunks_of(work[NLARGE], TEAM_LIST), _team_scan_large,
+                      (pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start, sorted_ids, ncx,
+                       ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, uniform), me)
+            first = ti.static((pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                     n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                     spread, real, periodic, two_level, uniform))
+            stage(sync, 8, np_, _team_first_pick, first, me)
+            stage(sync, 9, np_, _team_first_resolve, first, me)
+            stage(sync, 10, 1, _team_next_round, (work, sync, 0, 0), me)
+            for r in range(1, rounds):
+                side = r % 2
+                s = 11 + 3 * (r - 1)
+                items = sync[value_slot(r)]
+                chunks = chunks_of(items, TEAM_LIST)
+                stage(sync, s, chunks, _team_pick,
+                      (items, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, contacts,
+                       n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                       spread, real, periodic, two_level, uniform, side, marked, False), me)
+                stage(sync, s + 1, chunks, _team_resolve,
+                      (items, pos, vel, radius, inv_mass, ids, partner, picked, pair_count, virial, marked, contacts,
+                       n_contacts, lists, work, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, box_w, box_h,
+                       spread, real, periodic, two_level, uniform, side, False), me)
+                stage(sync, s + 2, 1, _team_next_round, (work, sync, side, r), me)
+            if ti.static(not periodic):
+                stage(sync, ti.static(11 + 3 * (rounds - 1)), chunks_of(work[WALLED], TEAM_LIST), _team_walls,
+                      (walled, work, pos, vel, radius, inv_mass, wall_count, wall_impulse, box_w, box_h, real,
+                       uniform), me)
+    return work[LIST0]

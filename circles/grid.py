@@ -180,51 +180,79 @@ def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(
             keep(i, p, args)
             enter_cell(i, p, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
     else:
-        ncells = cells_in(ncx, ncy, periodic)
         ti.loop_config(serialize=True)
         for _ in range(1):
-            parts[0] = 0
-            for k in range(1, np_):
-                lo, _hi = _part_range(n, k, np_)
-                parts[k] = ti.max(parts[k - 1], ti.min(ti.max(cell_of[lo], 0), ncells))
-            parts[np_] = ncells
-        g = ti.static(CPU_GROUP)
+            owned_starts(n, cell_of, parts, ncx, ncy, periodic)
         ti.loop_config(serialize=serial)
         for it in range(np_ * PART_ITERATIONS):
             if it % PART_ITERATIONS == 0:
-                k = it // PART_ITERATIONS
-                lo, hi = _part_range(n, k, np_)
-                own_lo = parts[k]
-                own_hi = parts[k + 1]
-                strays = 0
-                for q in range((hi - lo) // g):
-                    first = lo + q * g
-                    ps = ti.Matrix.zero(real, g, 2)
-                    cs = ti.Vector.zero(ti.i32, g)
-                    for u in ti.static(range(g)):
-                        p = place(first + u, args)
-                        ps[u, 0] = p[0]
-                        ps[u, 1] = p[1]
-                        cs[u] = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
-                    for u in ti.static(range(g)):
-                        keep(first + u, ti.Vector([ps[u, 0], ps[u, 1]], dt=real), args)
-                    for u in ti.static(range(g)):
-                        cell_of[first + u] = cs[u]
-                    for u in ti.static(range(g)):
-                        strays = _count_owned(first + u, cs[u], own_lo, own_hi, lo, strays, cell_count, slot, stray)
-                for i in range(lo + (hi - lo) // g * g, hi):
-                    p = place(i, args)
-                    keep(i, p, args)
-                    c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
-                    cell_of[i] = c
-                    strays = _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count, slot, stray)
-                parts[np_ + 1 + k] = strays
+                count_part(it // PART_ITERATIONS, n, place, keep, args, cell_of, slot, cell_count, stray, parts, ncx,
+                           ncy, inv_cw, inv_ch, real, periodic)
         ti.loop_config(serialize=True)
-        for k in range(np_):
-            lo, _hi = _part_range(n, k, np_)
-            for m in range(parts[np_ + 1 + k]):
-                i = stray[lo + m]
-                _count_plain(i, cell_of[i], cell_count, slot)
+        for _ in range(1):
+            count_strays(n, cell_of, slot, cell_count, stray, parts)
+
+
+@ti.func
+def owned_starts(n, cell_of: ti.template(), parts: ti.template(), ncx, ncy, periodic: ti.template()):
+    """The first stage of `enter_cells` on a CPU, on one thread: the cells each part owns, from
+    the cells its first circle had at the last count."""
+    np_ = ti.static(count_parts())
+    ncells = cells_in(ncx, ncy, periodic)
+    parts[0] = 0
+    for k in range(1, np_):
+        lo, _hi = _part_range(n, k, np_)
+        parts[k] = ti.max(parts[k - 1], ti.min(ti.max(cell_of[lo], 0), ncells))
+    parts[np_] = ncells
+
+
+@ti.func
+def count_part(k, n, place: ti.template(), keep: ti.template(), args: ti.template(), cell_of: ti.template(),
+               slot: ti.template(), cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy,
+               inv_cw, inv_ch, real: ti.template(), periodic: ti.template()):
+    """Part k of `enter_cells` on a CPU (one thread): its circles placed and kept, and counted
+    into the cells the part owns, the others set aside as strays."""
+    np_ = ti.static(count_parts())
+    g = ti.static(CPU_GROUP)
+    lo, hi = _part_range(n, k, np_)
+    own_lo = parts[k]
+    own_hi = parts[k + 1]
+    strays = 0
+    for q in range((hi - lo) // g):
+        first = lo + q * g
+        ps = ti.Matrix.zero(real, g, 2)
+        cs = ti.Vector.zero(ti.i32, g)
+        for u in ti.static(range(g)):
+            p = place(first + u, args)
+            ps[u, 0] = p[0]
+            ps[u, 1] = p[1]
+            cs[u] = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+        for u in ti.static(range(g)):
+            keep(first + u, ti.Vector([ps[u, 0], ps[u, 1]], dt=real), args)
+        for u in ti.static(range(g)):
+            cell_of[first + u] = cs[u]
+        for u in ti.static(range(g)):
+            strays = _count_owned(first + u, cs[u], own_lo, own_hi, lo, strays, cell_count, slot, stray)
+    for i in range(lo + (hi - lo) // g * g, hi):
+        p = place(i, args)
+        keep(i, p, args)
+        c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+        cell_of[i] = c
+        strays = _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count, slot, stray)
+    parts[np_ + 1 + k] = strays
+
+
+@ti.func
+def count_strays(n, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), stray: ti.template(),
+                 parts: ti.template()):
+    """The last stage of `enter_cells` on a CPU, on one thread: every part's strays counted, in
+    the parts' order."""
+    np_ = ti.static(count_parts())
+    for k in range(np_):
+        lo, _hi = _part_range(n, k, np_)
+        for m in range(parts[np_ + 1 + k]):
+            i = stray[lo + m]
+            _count_plain(i, cell_of[i], cell_count, slot)
 
 
 @ti.func
@@ -238,20 +266,29 @@ def finish_cells(cell_of: ti.template(), slot: ti.template(), cell_count: ti.tem
     else:
         # CPU_GROUP circles at a time, their loads before their stores (see `enter_cells`).
         g = ti.static(CPU_GROUP)
-        n = cell_of.shape[0]
         ti.loop_config(serialize=serial)
-        for q in range((n + g - 1) // g):
-            at = ti.Vector.zero(ti.i32, g)
-            for u in ti.static(range(g)):
-                i = q * g + u
-                at[u] = -1
-                if i < n:
-                    c = cell_of[i]
-                    if c >= 0:
-                        at[u] = cell_start[c] + slot[i]
-            for u in ti.static(range(g)):
-                if at[u] >= 0:
-                    sorted_ids[at[u]] = q * g + u
+        for q in range((cell_of.shape[0] + g - 1) // g):
+            scatter_group(q, cell_of, slot, cell_start, sorted_ids)
+
+
+@ti.func
+def scatter_group(q, cell_of: ti.template(), slot: ti.template(), cell_start: ti.template(),
+                  sorted_ids: ti.template()):
+    """The ids of circles q CPU_GROUP to (q + 1) CPU_GROUP scattered into their slots, their
+    loads before their stores (see `enter_cells`)."""
+    g = ti.static(CPU_GROUP)
+    n = cell_of.shape[0]
+    at = ti.Vector.zero(ti.i32, g)
+    for u in ti.static(range(g)):
+        i = q * g + u
+        at[u] = -1
+        if i < n:
+            c = cell_of[i]
+            if c >= 0:
+                at[u] = cell_start[c] + slot[i]
+    for u in ti.static(range(g)):
+        if at[u] >= 0:
+            sorted_ids[at[u]] = q * g + u
 
 
 @ti.func
@@ -285,16 +322,11 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells, serial: ti.te
     else:
         ti.loop_config(serialize=serial)
         for b in range(nchunks):
-            lo = b * chunk
-            hi = ti.min(lo + chunk, ncells)
-            total = 0
-            for c in range(lo, hi):
-                total += count[c]
-            start[hi] = total
+            chunk_total(b, count, start, ncells)
     if ti.static(group == 0):
         ti.loop_config(serialize=True)
-        for b in range(1, nchunks):
-            start[ti.min((b + 1) * chunk, ncells)] += start[b * chunk]
+        for _ in range(1):
+            chunk_ends(start, ncells)
     else:
         ngroups = (nchunks + group - 1) // group
         if ti.static(_warp_fill()):
@@ -319,9 +351,36 @@ def prefix_sum(count: ti.template(), start: ti.template(), ncells, serial: ti.te
     else:
         ti.loop_config(serialize=serial)
         for b in range(nchunks):
-            lo = b * chunk
-            hi = ti.min(lo + chunk, ncells)
-            _run_starts(count, start, lo, hi)
+            chunk_starts(b, count, start, ncells)
+
+
+@ti.func
+def chunk_total(b, count: ti.template(), start: ti.template(), ncells):
+    """Pass 1 of `prefix_sum` for chunk b: its total, at its end in `start`."""
+    chunk = ti.static(_scan_shape()[0])
+    lo = b * chunk
+    hi = ti.min(lo + chunk, ncells)
+    total = 0
+    for c in range(lo, hi):
+        total += count[c]
+    start[hi] = total
+
+
+@ti.func
+def chunk_ends(start: ti.template(), ncells):
+    """Passes 2 to 4 of `prefix_sum` without groups, on one thread: the running total over the
+    chunk ends."""
+    chunk = ti.static(_scan_shape()[0])
+    for b in range(1, (ncells + chunk - 1) // chunk):
+        start[ti.min((b + 1) * chunk, ncells)] += start[b * chunk]
+
+
+@ti.func
+def chunk_starts(b, count: ti.template(), start: ti.template(), ncells):
+    """Pass 5 of `prefix_sum` for chunk b (after start[0] = 0)."""
+    chunk = ti.static(_scan_shape()[0])
+    lo = b * chunk
+    _run_starts(count, start, lo, ti.min(lo + chunk, ncells))
 
 
 @ti.func

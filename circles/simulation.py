@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import taichi as ti
 
-from . import discrete, event, launch, placement, reductions
+from . import discrete, event, launch, placement, reductions, team
 from .backend import current_arch, ensure_init, on_restart, runtime, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
@@ -93,6 +93,12 @@ DISCRETE_UNIFORM = True
 #: (`discrete._first_round_in_parts`). False: a loop over every circle, as on a GPU (for tests
 #: that compare the two).
 DISCRETE_FIRST_IN_PARTS = True
+#: On a CPU with several threads, a discrete step's move, grid, rounds and walls run as one
+#: team (`discrete.team_step`, `circles.team`): one start of the thread pool a step instead of
+#: one per loop. False: `discrete.begin_step`'s loops.
+DISCRETE_TEAM = True
+#: Runs the team's members one after another on one thread (for tests: the same state).
+DISCRETE_TEAM_SERIAL = False
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
 #: Steps in a row that `advance` lets end at their start (cut by a collision that would make
@@ -759,6 +765,10 @@ class Simulation:
             self._uniform = DISCRETE_UNIFORM and bool(np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]))
             # The first round of a step in one part per thread (`discrete._first_round_in_parts`).
             self._first_parts = DISCRETE_FIRST_IN_PARTS and count_parts() > 1
+            # A step's stages on the CPU's threads as one team (`discrete.team_step`).
+            self._team = DISCRETE_TEAM and current_arch() == "cpu" and not self._serial and count_parts() > 1
+            if self._team:
+                self._sync = ti.ndarray(ti.i32, shape=team.sync_slots())
 
     def _setup_parts(self):
         """The event queue's calendar heads, and the arrays of a queue split into parts
@@ -1360,10 +1370,15 @@ class Simulation:
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
         two = self._two_level
         parallel = self._parallel_rounds
-        busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large, self.grid.parts,
-                                   real, periodic, two, self._uniform,
-                                   DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS),
-                                   self._first_parts)
+        if self._team:
+            busy = discrete.team_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large,
+                                      self.grid.parts, self._sync, real, periodic, two, self._uniform,
+                                      DISCRETE_FUSED_ROUNDS, DISCRETE_TEAM_SERIAL)
+        else:
+            busy = discrete.begin_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large,
+                                       self.grid.parts, real, periodic, two, self._uniform,
+                                       DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS),
+                                       self._first_parts)
         self.grid.complete = True
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.

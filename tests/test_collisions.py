@@ -424,18 +424,68 @@ def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypa
     every circle that a GPU runs, on a dense, fast scene of mixed radii run with parallel loops
     (backend.SERIAL_N at 0): isolated pairs, circles with several overlaps, contact lists that
     overflow into cell searches, and walls."""
-    from circles import backend, grid
+    from circles import backend, grid, simulation
     if grid.count_parts() < 2:
         pytest.skip("one CPU thread (or a GPU): the first round has no parts")
     monkeypatch.setattr(backend, "SERIAL_N", 0)
+    monkeypatch.setattr(simulation, "DISCRETE_TEAM", False)  # the team always runs the first round in parts
     scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
                               precision="f32", seed=5, dt=0.002, boundary=boundary)
 
     def check(sim, parts):
-        assert sim._parallel_rounds > 0
+        assert sim._parallel_rounds > 0 and not sim._team
 
     runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_FIRST_IN_PARTS", 40, check)
     assert_runs_equal(runs, boundary, pairs=10000, walls=500)
+
+
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
+    """On a CPU with several threads a discrete step runs as one team (`discrete.team_step`,
+    `circles.team`): its stages in chunks that the threads take, with no start of the thread
+    pool between them. It must give the state of the step's loops (`discrete.begin_step`) bit
+    for bit, on a dense, fast scene of mixed radii whose rounds go on for several rounds:
+    isolated pairs, circles with several overlaps, contact lists that overflow into cell
+    searches, walls. And with the team's members run one after another on one thread (the
+    first does every chunk, the others find them done), again the same state."""
+    from circles import backend, grid, simulation
+    if grid.count_parts() < 2:
+        pytest.skip("one CPU thread (or a GPU): no team")
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
+                              precision="f32", seed=5, dt=0.002, boundary=boundary)
+
+    def check(sim, team):
+        assert sim._team == team and sim._parallel_rounds > 0
+
+    runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_TEAM", 40, check)
+    assert_runs_equal(runs, boundary, pairs=10000, walls=500)
+    monkeypatch.setattr(simulation, "DISCRETE_TEAM_SERIAL", True)
+    one = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_TEAM", 40, check, values=(True,))
+    assert_runs_equal([runs[0], one[0]], boundary, pairs=10000, walls=500)
+
+
+def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch):
+    """The team step (see above) on a two-level grid, whose large circles search their blocks
+    in a stage of their own: the state of the step's loops, bit for bit."""
+    from circles import backend, grid, simulation
+    from physics_util import two_size_mixture
+    if grid.count_parts() < 2:
+        pytest.skip("one CPU thread (or a GPU): no team")
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    pos, vel, radius, box = two_size_mixture("f32")
+    out = []
+    for team in (True, False):
+        monkeypatch.setattr(simulation, "DISCRETE_TEAM", team)
+        sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme="discrete",
+                                                 precision="f32", dt=0.02)
+        assert sim._team == team and sim._two_level
+        sim.step(20)
+        out.append((sim.state(), sim.stats()))
+    (a, st_a), (b, st_b) = out
+    assert st_a == st_b and st_a["pair_collisions"] > 500 and st_a["wall_collisions"] > 50
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
 
 
 def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
