@@ -155,12 +155,16 @@ def runtime() -> int:
 
 
 #: Up to this many circles, the loops of a step on a CPU run on one thread: starting a parallel
-#: loop on the CPU's thread pool costs tens of microseconds, and a discrete step starts about
-#: 35 (on this project's 2-core machine, the discrete scheme on one thread against two, both
-#: in one process stepped in turn after 30 steps, `bench/versus.py --interleave`: 1.76, 1.37
-#: and 1.22 times as fast at 3e4, 5e4 and 7e4 circles; in separate processes 1.2 to 1.3 times
-#: at 7e4, and two threads 1.2 times as fast at 1e5).
-SERIAL_N = 70_000
+#: loop on the CPU's thread pool costs tens of microseconds, and the pool's start and the
+#: waits between a step's stages cost more than the second thread saves on a small scene. A
+#: discrete step on several threads runs as one team (one start of the pool a step,
+#: `circles.team`); against one thread, on an Intel host (2 cores, `python bench/versus.py
+#: --base 10187b9 --n 3000 10000 30000 70000 --scheme discrete --warm 40 --rounds 4 --steps
+#: 400`, this limit at 0 against 70000 there): 0.411, 0.628, 0.999 and 1.321 times as fast at
+#: 3e3, 1e4, 3e4 and 7e4 circles. (Before the team, with a pool start for each of the step's
+#: 13 loops, the limit was 70000: one thread 1.76, 1.37 and 1.22 times as fast at 3e4, 5e4
+#: and 7e4 circles on this project's AMD host.)
+SERIAL_N = 30_000
 #: The event scheme's limit, as circles times the CPU's threads: up to it, a step runs on one
 #: thread from one queue (`event.queue_step`, each pair's first time computed once) rather
 #: than in parts on every thread (`event.queue_parts`). The parts pay for their split, their
