@@ -14,9 +14,9 @@ chunk of the stage is done, and then goes on to the next stage (`stage`). A stag
 chunk is run by one member, as a serial statement between loops would be.
 
 A member waits only for chunks that another member took and is running, and a chunk waits for
-nothing, so a team cannot deadlock, whatever the pool does: a member that starts late (or
-never, when the pool runs both iterations on one thread) finds the chunks of the stages before
-taken and done, and passes through them. What a chunk does must not depend on which member
+nothing, so a team cannot deadlock, whatever the pool does: a member that starts late (as
+when the pool runs the iterations one after another on one thread) finds the chunks of the
+stages before taken and done, and passes through them. What a chunk does must not depend on which member
 runs it, and each stage's count of chunks must be the same whenever a member reads it: a
 constant, or a value that an earlier stage wrote and no later stage of the kernel changes
 (a late member reads it after the stages that might). The counters live in a `sync` array of
