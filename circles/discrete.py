@@ -281,8 +281,6 @@ def _scan_slot(own, pos: ti.template(), vel: ti.template(), radius: ti.template(
                spread: ti.template(), real: ti.template(), periodic: ti.template(), two_level: ti.template(),
                uniform: ti.template()):
     """`_scan_contacts` of the circle in slot `own`: its pairs with the forward half of its cells."""
-    forward = forward_fits(ncx, ncy, periodic)
-    box = ti.Vector([box_w, box_h], dt=real)
     # In slot order: the circle's own slot is the loop index, and its forward slots follow.
     rnd = work[ROUND]
     i = sorted_ids[own]
@@ -308,8 +306,10 @@ def _scan_slot(own, pos: ti.template(), vel: ti.template(), radius: ti.template(
                 if d.dot(d) < s * s:
                     _record_overlap(i, j, d, vel, contacts, n_contacts, marked, rnd)
     else:
-        pairs_once(own, i, c, forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _contact_of,
-                   (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform))
+        # A periodic box: the forward cells and the box for the images, which a walled one needs not.
+        box = ti.Vector([box_w, box_h], dt=real)
+        pairs_once(own, i, c, forward_fits(ncx, ncy, periodic), cell_start, sorted_ids, ncx, ncy, rows, segs, periodic,
+                   _contact_of, (pos, vel, radius, contacts, n_contacts, marked, rnd, box, periodic, uniform))
 
 
 @ti.func
