@@ -60,6 +60,12 @@ MP4_MAX_FPS = 1_000_000
 MP4_AREA_LIMIT = 2**28
 # Constant quality for H.264: 18 is visually lossless, which keeps one-pixel circles crisp.
 MP4_CRF = 18
+# libx264's speed preset. "veryfast" encodes the showcase (150 frames of 1280x720) in 4.3 s of
+# processor time against 10.2 s for the default "medium", at a 10% larger file and a PSNR
+# 0.8 dB lower (31.8 against 32.6 dB, both at CRF 18); 30 frames of 1e6 one-pixel circles at
+# 1920x1080 in 2.0 s against 6.2 s, at a 6% smaller file and 0.35 dB lower. An encoder that
+# shares the processors with the simulation held `circles run` up more than the simulation.
+MP4_PRESET = "veryfast"
 # zlib level for PNG frames: nearly the size of level 6 at a fraction of the time.
 PNG_COMPRESS_LEVEL = 3
 PNG_PATTERN = re.compile(r"frame_\d{5,}\.png")
@@ -320,7 +326,7 @@ class _Mp4Sink:
             self._executable, "-nostats", "-v", "error", "-y",
             "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}",
             "-r", repr(self.fps), "-i", "-", "-an",
-            "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(MP4_CRF),
+            "-c:v", "libx264", "-preset", MP4_PRESET, "-pix_fmt", "yuv420p", "-crf", str(MP4_CRF),
             # "file:" and an absolute path: a name with a colon or a leading dash is a file.
             "-f", "mp4", "file:" + os.path.abspath(self.path)]
         try:
