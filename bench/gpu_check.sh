@@ -3,20 +3,25 @@
 # for a short while: first the tests that run the engine's GPU paths (the event scheme's rounds
 # against the serial reference, the physics and conservation tests, the collision cases), then
 # the GPU benchmark's throughput rows (10^4 to 10^8 circles, f32; `bench/bench.py --arch gpu`,
-# placement and radius-spread sections left out). A check stopped by its limit keeps what it
-# wrote: the tests' log, the benchmark's log (each row as it is measured, copied into the
-# summary) and the tables of the sections it finished (it rewrites them after every section).
+# placement and radius-spread sections left out), then where an event step's time goes at 10^7
+# circles (`bench/kernel_profile.py --arch gpu --scheme event`: each task's share, and the rounds
+# and bound sweeps a step). A check stopped by its limit keeps what it wrote: the tests' log, the
+# benchmark's log (each row as it is measured, copied into the summary), the tables of the
+# sections it finished (it rewrites them after every section) and the profile's log.
 #
 # Usage, from the repository root, with the project's packages importable:
-#   bash bench/gpu_check.sh OUTDIR [TEST_SECONDS] [BENCH_SECONDS]
-# (defaults 180 and 330: both within ten minutes). OUTDIR gets summary.txt (each check's exit
-# status, 124 for one stopped by its limit, and the tests' last lines), tests.log, bench.log and
-# bench/<gpu name>/ (results.md and the CSV tables). CIRCLES_CHECK_ARCH=cpu runs the same checks
-# on the CPU, to try the script on a machine without a GPU.
+#   bash bench/gpu_check.sh OUTDIR [TEST_SECONDS] [BENCH_SECONDS] [PROFILE_SECONDS]
+# (defaults 180, 300 and 90: all three within ten minutes). OUTDIR gets summary.txt (each check's
+# exit status, 124 for one stopped by its limit, the tests' last lines, the throughput rows and
+# the profile's first rows), tests.log, bench.log, bench/<gpu name>/ (results.md and the CSV
+# tables) and profile.log. CIRCLES_CHECK_ARCH=cpu runs the same checks on the CPU, to try the
+# script on a machine without a GPU; CIRCLES_CHECK_PROFILE_N sets the profile's circles (1e7).
 set -uo pipefail
-out=${1:?usage: bash bench/gpu_check.sh OUTDIR [TEST_SECONDS] [BENCH_SECONDS]}
+out=${1:?usage: bash bench/gpu_check.sh OUTDIR [TEST_SECONDS] [BENCH_SECONDS] [PROFILE_SECONDS]}
 test_s=${2:-180}
-bench_s=${3:-330}
+bench_s=${3:-300}
+profile_s=${4:-90}
+profile_n=${CIRCLES_CHECK_PROFILE_N:-1e7}
 arch=${CIRCLES_CHECK_ARCH:-gpu}
 python=${PYTHON:-python3}
 cd "$(dirname "$0")/.."
@@ -24,7 +29,7 @@ mkdir -p "$out" || exit 2
 summary="$out/summary.txt"
 : > "$summary"
 {
-  echo "gpu_check on $(date -u '+%Y-%m-%d %H:%M UTC'), arch $arch, limits ${test_s} s (tests) and ${bench_s} s (bench)"
+  echo "gpu_check on $(date -u '+%Y-%m-%d %H:%M UTC'), arch $arch, limits ${test_s} s (tests), ${bench_s} s (bench) and ${profile_s} s (profile)"
   git rev-parse --short HEAD 2>/dev/null | sed 's/^/commit /'
   command -v nvidia-smi > /dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
 } >> "$summary" 2>&1
@@ -39,4 +44,9 @@ timeout "$bench_s" "$python" bench/bench.py --arch "$arch" --skip placement,spre
   > "$out/bench.log" 2>&1
 echo "bench: exit $?" >> "$summary"
 grep -E "circle-steps/s" "$out/bench.log" | tail -n 20 >> "$summary"
+
+timeout "$profile_s" "$python" bench/kernel_profile.py --arch "$arch" --n "$profile_n" --scheme event --steps 5 \
+  --warm 10 > "$out/profile.log" 2>&1
+echo "profile: exit $?" >> "$summary"
+grep -E "circle-steps/s|per step|%" "$out/profile.log" | head -n 24 >> "$summary"
 cat "$summary"

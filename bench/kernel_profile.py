@@ -53,13 +53,14 @@ def profile(n, scheme, steps, warm=2):
     sim = circles.Simulation(bench_scene(n, scheme))
     place_s = time.perf_counter() - t0
     sim.step(warm)
-    rounds0 = sim.rounds
+    rounds0, sweeps0 = sim.rounds, sim.sweeps
     times, pairs, energy_change, overlap = time_steps(sim, steps)
     rates = n / times / 1e6
     print(f"\n{scheme} N={n}: placement {place_s:.2f} s; {np.median(rates):.3g} M circle-steps/s median "
           f"[{rates.min():.3g}, {rates.max():.3g}] over {steps} steps; {pairs / (n * steps):.3g} collisions per "
           "circle-step; "
-          f"{(sim.rounds - rounds0) / steps:.1f} rounds per step; energy change {energy_change:.2e}; "
+          f"{(sim.rounds - rounds0) / steps:.1f} rounds and {(sim.sweeps - sweeps0) / steps:.1f} bound sweeps per step; "
+          f"energy change {energy_change:.2e}; "
           f"largest overlap {overlap:.2e}", flush=True)
     ti.profiler.clear_kernel_profiler_info()
     t0 = time.perf_counter()
