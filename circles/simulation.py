@@ -56,6 +56,11 @@ DISCRETE_FUSED_ROUNDS = 8
 #: number chosen from the lists, measured no better: bench/PERFORMANCE.md). A GPU runs every
 #: round in parallel.
 DISCRETE_PARALLEL_ROUNDS = 4
+#: Discrete steps run in one launch, at most, where a step runs on one thread (see
+#: backend.serial_loops): a launch and its call cost some 20 microseconds, more than the whole
+#: step of a few hundred circles (`discrete.serial_steps`). A reorder (REORDER_EVERY) ends a
+#: batch. 1: a launch a step.
+DISCRETE_STEPS_AT_ONCE = 16
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
 #: without the rounds' bound sweeps and passes over every circle. False: rounds on a CPU too.
@@ -737,6 +742,7 @@ class Simulation:
             # The queue's grid may have two levels (`event.build_coarse`); the rounds' has one.
             self._setup_two_level(self._event_queue)
             self._setup_parts()
+        self._steps_at_once = 1
         if scheme == "discrete":
             if current_arch() == "gpu":
                 self._parallel_rounds = DISCRETE_MAX_ROUNDS
@@ -769,6 +775,8 @@ class Simulation:
             self._team = DISCRETE_TEAM and current_arch() == "cpu" and not self._serial and count_parts() > 1
             if self._team:
                 self._sync = ti.ndarray(ti.i32, shape=team.sync_slots())
+            # Several steps a launch where a step runs on one thread (`discrete.serial_steps`).
+            self._steps_at_once = DISCRETE_STEPS_AT_ONCE if self._parallel_rounds == 0 and not self._team else 1
 
     def _setup_parts(self):
         """The event queue's calendar heads, and the arrays of a queue split into parts
@@ -1011,6 +1019,14 @@ class Simulation:
         stalled = 0  # steps in a row cut at their start (see below)
         with _whole_steps() as steps:
             while self._time < end:
+                count = self._batch(self._dt, self._steps_at_once, end)
+                if count > 1:
+                    self._run_batch(self._dt, count)
+                    if self.steps % REORDER_EVERY == 0:
+                        self._reorder()
+                    steps.between_steps()
+                    stalled = 0
+                    continue
                 left = end - self._time
                 h = min(self._dt, left)
                 if h < left:
@@ -1053,18 +1069,48 @@ class Simulation:
             raise ValueError(f"k = {k!r} must be a whole number of steps >= 0")
         dt = self._dt
         with _whole_steps() as steps:
-            for _ in range(int(k)):
-                self._check_clock_counts(dt, "dt")
-                done = 0.0
-                while done < dt:
-                    done += self._step(dt - done)
-                self._time += dt
-                self.steps += 1
+            left = int(k)
+            while left > 0:
+                count = self._batch(dt, left)
+                if count > 1:
+                    self._run_batch(dt, count)
+                else:
+                    count = 1
+                    self._check_clock_counts(dt, "dt")
+                    done = 0.0
+                    while done < dt:
+                        done += self._step(dt - done)
+                    self._time += dt
+                    self.steps += 1
+                left -= count
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
                 steps.between_steps()
         self._check_finite()
         return self
+
+    def _batch(self, h, most, end=None):
+        """How many of the next steps, each of length h, run in one launch (`_steps_at_once`, on
+        one thread; otherwise 1): at most `most`, none past the next reorder, and each one that
+        the clock counts as h (`_check_clock_counts`) and, with `end` (`advance`), that ends
+        before it."""
+        if self._steps_at_once == 1:
+            return 1
+        most = min(most, self._steps_at_once, REORDER_EVERY - self.steps % REORDER_EVERY)
+        time, count = self._time, 0
+        while count < most and (end is None or h < end - time) and \
+                abs(((time + h) - time) - h) <= CLOCK_TOLERANCE * h:
+            time += h
+            count += 1
+        return count
+
+    def _run_batch(self, h, count):
+        """`count` steps of length h in as few launches as they allow (see `_batch`), the clock
+        and the step count kept as a step at a time keeps them."""
+        self._discrete_steps(h, count)
+        for _ in range(count):
+            self._time += h
+        self.steps += count
 
     def _check_clock_counts(self, h, what):
         """Refuse a step (or an advance) of length h > 0 that the simulated clock, at its time
@@ -1360,7 +1406,9 @@ class Simulation:
         if self._record_cap > 0:
             self._set_counter(1, log_count)
 
-    def _discrete_step(self, h):
+    def _discrete_args(self):
+        """What a discrete step's kernels take: the box, precision and boundary, the grid's cells
+        (`Grid.prepare`) and spans, the circles' arrays, and whether the grid has two levels."""
         w, hgt = self.box
         real, periodic = self._real, self.periodic
         _, *cells = self.grid.prepare(2.0 * self._r_cut)
@@ -1368,7 +1416,10 @@ class Simulation:
         arrays = (self.pos, self.vel, self.radius, self.inv_mass, self.ids, self._partner, self._picked,
                   self._marked, self._contacts, self._n_contacts, self._work_lists, self._work, self.pair_count,
                   self.virial, self.wall_count, self.wall_impulse, self._walled)
-        two = self._two_level
+        return w, hgt, real, periodic, cells, rows, segs, arrays, self._two_level
+
+    def _discrete_step(self, h):
+        w, hgt, real, periodic, cells, rows, segs, arrays, two = self._discrete_args()
         parallel = self._parallel_rounds
         if self._team:
             busy = discrete.team_step(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large,
@@ -1380,6 +1431,28 @@ class Simulation:
                                        DISCRETE_FUSED_ROUNDS, min(parallel, DISCRETE_FUSED_ROUNDS),
                                        self._first_parts)
         self.grid.complete = True
+        self._more_rounds(busy, w, hgt, real, periodic, two, arrays, parallel)
+        return h
+
+    def _discrete_steps(self, h, count):
+        """`count` discrete steps of length h on one thread, as many in a launch as settle within
+        their fused rounds (`discrete.serial_steps`): the state of `count` calls of
+        `_discrete_step`, bit for bit."""
+        w, hgt, real, periodic, cells, rows, segs, arrays, two = self._discrete_args()
+        while count > 0:
+            begun = discrete.serial_steps(*arrays, *cells, rows, segs, h, w, hgt, self._spread, self._large,
+                                          self.grid.parts, count, real, periodic, two, self._uniform,
+                                          DISCRETE_FUSED_ROUNDS)
+            self.grid.complete = True
+            busy = begun < 0
+            begun = abs(begun)
+            count -= begun
+            self.rounds += (begun - 1) * DISCRETE_FUSED_ROUNDS
+            self._more_rounds(busy, w, hgt, real, periodic, two, arrays, 0)
+
+    def _more_rounds(self, busy, w, hgt, real, periodic, two, arrays, parallel):
+        """The rest of a discrete step whose fused rounds left work (`busy`): more rounds up to
+        DISCRETE_MAX_ROUNDS, and the walls if they did not settle; counts the step's rounds."""
         done = DISCRETE_FUSED_ROUNDS
         # Most steps settle within the fused rounds; `busy` says whether another round has work.
         while busy and done < DISCRETE_MAX_ROUNDS:
@@ -1393,7 +1466,6 @@ class Simulation:
             # The round limit was reached: the walls were left for rounds that did not come.
             discrete.walls(self.pos, self.vel, self.radius, self.inv_mass, self.wall_count, self.wall_impulse,
                            self._walled, self._work, w, hgt, real, self._uniform)
-        return h
 
     def _set_scalars(self, a, b):
         self._scalars.from_numpy(np.array([a, b], dtype=self._np_real))

@@ -488,6 +488,66 @@ def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch
     np.testing.assert_array_equal(a.vel, b.vel)
 
 
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="steps run on one thread on a CPU only")
+@pytest.mark.parametrize("name", ["walls-f32", "periodic-f32", "walls-f64-dense", "two-level-f32"])
+def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, name):
+    """Where a discrete step runs on one thread, `step(k)` and `advance` run up to
+    simulation.DISCRETE_STEPS_AT_ONCE steps in one launch (`discrete.serial_steps`), a batch
+    ending early at a step whose fused rounds did not settle, which the host finishes with
+    more rounds (and, at the round limit, the walls). The run must be the one of a launch a
+    step bit for bit: state, counts, sums, clock, steps and rounds, over steps that cross the
+    reorders (every simulation.REORDER_EVERY steps) and an advance that ends in a part step.
+    Scenes: fast enough that some steps need more rounds than the fused ones (every step, in
+    the dense one), a periodic box, float64, and a two-level grid."""
+    from circles import discrete, simulation
+    from physics_util import two_size_mixture
+
+    def make():
+        if name == "two-level-f32":
+            pos, vel, radius, box = two_size_mixture("f32")
+            return circles_cpu.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme="discrete",
+                                                      precision="f32", dt=0.02)
+        dense = name == "walls-f64-dense"
+        scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0),
+                                  scheme="discrete", precision="f64" if dense else "f32", seed=5,
+                                  dt=0.002 if dense else 0.0005, boundary=name.split("-")[0])
+        return circles_cpu.Simulation(scene)
+
+    launches = []
+    runs = []
+    for at_once in (simulation.DISCRETE_STEPS_AT_ONCE, 1):
+        monkeypatch.setattr(simulation, "DISCRETE_STEPS_AT_ONCE", at_once)
+        calls = []
+        kernel = discrete.serial_steps
+
+        def counted(*args, kernel=kernel, calls=calls):
+            calls.append(args)
+            return kernel(*args)
+
+        monkeypatch.setattr(discrete, "serial_steps", counted)
+        sim = make()
+        assert sim._serial and sim._steps_at_once == at_once
+        sim.step(37)
+        sim.advance(21.3 * sim.dt)
+        launches.append(len(calls))
+        runs.append((sim.state(), sim.stats(), sim.time, sim.steps, sim.rounds))
+    (a, st_a, *clock_a), (b, st_b, *clock_b) = runs
+    assert st_a == st_b and clock_a == clock_b
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
+    steps, rounds = clock_a[1], clock_a[2]
+    assert steps == 37 + 22 and st_a["pair_collisions"] > 1000
+    if name != "periodic-f32":
+        assert st_a["wall_collisions"] > 50
+    # Some steps needed more rounds than the fused ones; a launch a step made none in batches.
+    assert rounds > simulation.DISCRETE_FUSED_ROUNDS * steps
+    assert launches[1] == 0
+    if name == "walls-f64-dense":
+        assert rounds == simulation.DISCRETE_MAX_ROUNDS * steps  # every step: a batch of one
+    else:
+        assert 0 < launches[0] <= steps // 3
+
+
 def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
     """A length that is not a finite number >= 0 (a string, a bool, NaN, infinity, a negative
     or, for step, a fraction of a step) is refused with the value named, and nothing moves;
