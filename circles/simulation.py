@@ -1419,6 +1419,10 @@ class Simulation:
         return w, hgt, real, periodic, cells, rows, segs, arrays, self._two_level
 
     def _discrete_step(self, h):
+        if self._steps_at_once > 1:
+            # One step of `serial_steps`, the same kernel as the batches' (one kernel to compile).
+            self._discrete_steps(h, 1)
+            return h
         w, hgt, real, periodic, cells, rows, segs, arrays, two = self._discrete_args()
         parallel = self._parallel_rounds
         if self._team:
