@@ -32,6 +32,7 @@ import math
 import os
 import re
 import signal
+import statistics
 import sys
 import time
 import tomllib
@@ -421,6 +422,8 @@ def _run(scene, options):
     frames = frame_count(options["duration"], options["fps"])
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
+    # Each frame's simulation: (steps, seconds).
+    per_frame = []
     stop = _StopRequest()
     previous_handler = signal.signal(signal.SIGINT, stop)
     try:
@@ -444,13 +447,16 @@ def _run(scene, options):
                 if stop.requested:
                     break
                 tick = time.perf_counter()
+                steps_before = sim.steps
                 end = (k + 1) / options["fps"] if k + 1 < frames else options["duration"]
                 with stop.interruptible():
                     sim.advance(end - sim.time)
-                clock["simulate"] += time.perf_counter() - tick
+                seconds = time.perf_counter() - tick
+                clock["simulate"] += seconds
+                per_frame.append((sim.steps - steps_before, seconds))
                 completed = k + 1 == frames
                 bar.update(1)
-                rate = sim.n * sim.steps / max(clock["simulate"], 1e-9)
+                rate, _ = _throughput(sim.n, per_frame)
                 bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
                                     f"{rate:.3g} circle-steps/s", refresh=False)
                 if stop.requested:
@@ -475,20 +481,39 @@ def _run(scene, options):
         stats = sim.stats()
         stats_s += time.perf_counter() - tick
         wall_s = time.perf_counter() - started
-        _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
+        _summary(sim, arch, start_stats, stats, writer, clock, per_frame, setup_s, stats_s, wall_s,
                  not completed)
     finally:
         signal.signal(signal.SIGINT, previous_handler)
     return 0 if completed else EXIT_INTERRUPTED
 
 
-def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wall_s,
+#: Frames of a run, at least, whose median speed `_throughput` reports.
+MEDIAN_FRAMES = 5
+
+
+def _throughput(n, per_frame):
+    """Circle-steps per second of simulation from each frame's (steps, seconds), and what they
+    cover. The frames whose simulation runs a kernel for the first time in the process pay for
+    its translation (a second or so) and, with an empty cache, its compilation, which would hide
+    the speed of a short run: so with MEDIAN_FRAMES frames that took steps, or more, the median of
+    their speeds; with fewer, all the steps over all the time."""
+    rates = [n * steps / seconds for steps, seconds in per_frame if steps > 0 and seconds > 0]
+    if len(rates) >= MEDIAN_FRAMES:
+        return statistics.median(rates), f"median of {len(rates)} frames' simulation"
+    steps = sum(steps for steps, _ in per_frame)
+    seconds = sum(seconds for _, seconds in per_frame)
+    rate = n * steps / seconds if seconds > 0 else 0.0
+    return rate, "simulation only, the kernels' first calls included"
+
+
+def _summary(sim, arch, start_stats, stats, writer, clock, per_frame, setup_s, stats_s, wall_s,
              interrupted):
     from .video import frames_text
 
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
-    rate = sim.n * sim.steps / clock["simulate"] if clock["simulate"] > 0 else 0.0
+    rate, covers = _throughput(sim.n, per_frame)
     if arch == "cpu":
         from .backend import cpu_threads
         threads = cpu_threads()
@@ -500,7 +525,7 @@ def _summary(sim, arch, start_stats, stats, writer, clock, setup_s, stats_s, wal
         ("wall time", f"{wall_s:.1f} s: placement {setup_s:.1f}, simulation "
                       f"{clock['simulate']:.1f}, drawing {clock['render']:.1f}, "
                       f"writing {clock['write']:.1f}, statistics {stats_s:.1f}"),
-        ("throughput", f"{rate:.3g} circle-steps/s (simulation only)"),
+        ("throughput", f"{rate:.3g} circle-steps/s ({covers})"),
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
         ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
