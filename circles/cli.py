@@ -26,6 +26,8 @@ second at once; neither cuts short the writing of a frame or the finishing of th
 """
 
 import argparse
+import array
+import collections
 import contextlib
 import importlib
 import math
@@ -422,8 +424,7 @@ def _run(scene, options):
     frames = frame_count(options["duration"], options["fps"])
     speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
-    # Each frame's simulation: (steps, seconds).
-    per_frame = []
+    speeds = Speeds(sim.n)
     stop = _StopRequest()
     previous_handler = signal.signal(signal.SIGINT, stop)
     try:
@@ -453,10 +454,10 @@ def _run(scene, options):
                     sim.advance(end - sim.time)
                 seconds = time.perf_counter() - tick
                 clock["simulate"] += seconds
-                per_frame.append((sim.steps - steps_before, seconds))
+                speeds.add(sim.steps - steps_before, seconds)
                 completed = k + 1 == frames
                 bar.update(1)
-                rate, _ = _throughput(sim.n, per_frame)
+                rate = speeds.recent()
                 bar.set_postfix_str(f"t={sim.time:.2f}/{options['duration']:g} s, "
                                     f"{rate:.3g} circle-steps/s", refresh=False)
                 if stop.requested:
@@ -481,39 +482,62 @@ def _run(scene, options):
         stats = sim.stats()
         stats_s += time.perf_counter() - tick
         wall_s = time.perf_counter() - started
-        _summary(sim, arch, start_stats, stats, writer, clock, per_frame, setup_s, stats_s, wall_s,
+        _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stats_s, wall_s,
                  not completed)
     finally:
         signal.signal(signal.SIGINT, previous_handler)
     return 0 if completed else EXIT_INTERRUPTED
 
 
-#: Frames of a run, at least, whose median speed `_throughput` reports.
+#: Frames of a run, at least, whose median speed the summary reports (`Speeds.summary`).
 MEDIAN_FRAMES = 5
+#: Frames whose median speed the progress bar shows.
+RECENT_FRAMES = 9
 
 
-def _throughput(n, per_frame):
-    """Circle-steps per second of simulation from each frame's (steps, seconds), and what they
-    cover. The frames whose simulation runs a kernel for the first time in the process pay for
-    its translation (a second or so) and, with an empty cache, its compilation, which would hide
-    the speed of a short run: so with MEDIAN_FRAMES frames that took steps, or more, the median of
-    their speeds; with fewer, all the steps over all the time."""
-    rates = [n * steps / seconds for steps, seconds in per_frame if steps > 0 and seconds > 0]
-    if len(rates) >= MEDIAN_FRAMES:
-        return statistics.median(rates), f"median of {len(rates)} frames' simulation"
-    steps = sum(steps for steps, _ in per_frame)
-    seconds = sum(seconds for _, seconds in per_frame)
-    rate = n * steps / seconds if seconds > 0 else 0.0
-    return rate, "simulation only, the kernels' first calls included"
+class Speeds:
+    """The simulation's speed in circle-steps per second, frame by frame. The frames whose
+    simulation runs a kernel for the first time in the process pay for its translation (a second
+    or so) and, with an empty cache, its compilation, which would hide the speed of a short run:
+    so the summary gives the median of the frames' speeds (`summary`), the progress bar that of
+    the last RECENT_FRAMES (`recent`)."""
+
+    def __init__(self, n):
+        self.n = n
+        self.rates = array.array("d")  # of the frames that took steps: 8 bytes a frame
+        self.last = collections.deque(maxlen=RECENT_FRAMES)
+        self.steps = 0
+        self.seconds = 0.0
+
+    def add(self, steps, seconds):
+        """A frame's simulation: its steps and their seconds."""
+        self.steps += steps
+        self.seconds += seconds
+        if steps > 0 and seconds > 0:
+            rate = self.n * steps / seconds
+            self.rates.append(rate)
+            self.last.append(rate)
+
+    def recent(self):
+        """The median speed of the last RECENT_FRAMES frames that took steps (0 before any)."""
+        return statistics.median(self.last) if self.last else 0.0
+
+    def summary(self):
+        """(speed, what it covers): with MEDIAN_FRAMES frames that took steps, or more, the
+        median of their speeds; with fewer, all the steps over all the time."""
+        if len(self.rates) >= MEDIAN_FRAMES:
+            return statistics.median(self.rates), f"median of {len(self.rates)} frames' simulation"
+        rate = self.n * self.steps / self.seconds if self.seconds > 0 else 0.0
+        return rate, "simulation only, the kernels' first calls included"
 
 
-def _summary(sim, arch, start_stats, stats, writer, clock, per_frame, setup_s, stats_s, wall_s,
+def _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stats_s, wall_s,
              interrupted):
     from .video import frames_text
 
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
-    rate, covers = _throughput(sim.n, per_frame)
+    rate, covers = speeds.summary()
     if arch == "cpu":
         from .backend import cpu_threads
         threads = cpu_threads()

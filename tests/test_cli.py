@@ -50,15 +50,24 @@ def test_run_writes_a_gif_of_duration_times_fps_frames(tmp_path):
 def test_throughput_leaves_out_the_frames_of_first_calls():
     """The summary's speed: with MEDIAN_FRAMES frames that took steps or more, the median of
     their speeds, so that a frame that paid for a kernel's first call (a second or more) does
-    not hide the speed of a short run; with fewer, all steps over all the time."""
-    from circles.cli import MEDIAN_FRAMES, _throughput
+    not hide the speed of a short run; with fewer, all steps over all the time. The progress
+    bar's: the median of the last RECENT_FRAMES frames'."""
+    from circles.cli import MEDIAN_FRAMES, RECENT_FRAMES, Speeds
 
     frames = [(9, 1.5)] + [(9, 0.001)] * 4 + [(8, 0.002), (0, 0.0), (9, 0.4)]
-    rate, covers = _throughput(1000, frames)
-    assert MEDIAN_FRAMES == 5 and rate == 9e6 and covers == "median of 7 frames' simulation"
-    rate, covers = _throughput(1000, frames[:3])
-    assert rate == pytest.approx(27 * 1000 / 1.502, rel=1e-12) and "first calls included" in covers
-    assert _throughput(1000, []) == (0.0, "simulation only, the kernels' first calls included")
+    speeds = Speeds(1000)
+    assert speeds.recent() == 0.0
+    assert speeds.summary() == (0.0, "simulation only, the kernels' first calls included")
+    for k, (steps, seconds) in enumerate(frames):
+        speeds.add(steps, seconds)
+        if k == 2:
+            rate, covers = speeds.summary()
+            assert rate == pytest.approx(27 * 1000 / 1.502, rel=1e-12) and "first calls included" in covers
+            assert speeds.recent() == 9e6  # the median of 6000 and twice 9e6
+    assert MEDIAN_FRAMES == 5 and speeds.summary() == (9e6, "median of 7 frames' simulation")
+    for _ in range(RECENT_FRAMES):
+        speeds.add(2, 0.001)
+    assert speeds.recent() == 2e6 and speeds.summary()[0] == 2e6
 
 
 def test_one_pixel_sides_make_png_frames_as_the_canvas_does(tmp_path):
