@@ -548,6 +548,31 @@ def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, na
         assert 0 < launches[0] <= steps // 3
 
 
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="steps run on one thread on a CPU only")
+def test_discrete_steps_at_once_stop_where_the_clock_stops_counting(circles_cpu, monkeypatch):
+    """A batch of steps checks the clock before each of its steps as a step at a time does:
+    from time 2^24 - 5.5 dt (dt = 0.001), the clock counts the steps before 2^24 to within
+    2^-20 of dt (float64's unit there is 2^-29, below 2^-20 dt) and not the first after it
+    (2^-28), so step(10) takes those steps and then refuses with the clock's message, with
+    `simulation.DISCRETE_STEPS_AT_ONCE` at 16 as at 1: the same steps, time and state."""
+    from circles import simulation
+
+    runs = []
+    for at_once in (16, 1):
+        monkeypatch.setattr(simulation, "DISCRETE_STEPS_AT_ONCE", at_once)
+        sim = circles_cpu.Simulation(circles_cpu.Scene(n=500, box=(10.0, 10.0), radius=0.1, scheme="discrete",
+                                                       seed=2, dt=0.001))
+        assert sim._steps_at_once == at_once
+        sim.step(3)
+        sim.time = 2.0 ** 24 - 5.5 * 0.001
+        with pytest.raises(ValueError, match="dt = 0.001 is too short for the simulated clock"):
+            sim.step(10)
+        runs.append((sim.steps, sim.time, sim.state().pos))
+    (steps_a, time_a, pos_a), (steps_b, time_b, pos_b) = runs
+    assert steps_a == steps_b == 3 + 6 and time_a == time_b > 2.0 ** 24
+    np.testing.assert_array_equal(pos_a, pos_b)
+
+
 def test_advance_and_step_refuse_bad_lengths_before_any_work(circles_cpu):
     """A length that is not a finite number >= 0 (a string, a bool, NaN, infinity, a negative
     or, for step, a fraction of a step) is refused with the value named, and nothing moves;
