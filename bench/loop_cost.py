@@ -91,7 +91,7 @@ def cell_in_parts(pos: ti.types.ndarray(ndim=1), cell_of: nd, slot: nd, count: n
                   ncy: ti.i32):
     """The grid build's count on a CPU (`grid.enter_cells` with the build's own position reader)."""
     grid.enter_cells(pos.shape[0], grid._position, grid._keep_nothing, (pos,), cell_of, slot, count, stray, parts, ncx,
-                     ncy, ti.cast(ncx, ti.f64), ti.cast(ncy, ti.f64), ti.f32, True, False)
+                     ncy, ti.cast(ncx, ti.f64), ti.cast(ncy, ti.f64), 0, ti.f32, True, False)
 
 
 def each_copy(items, serial, src, dst):

@@ -96,7 +96,8 @@ def _keep_moved(i, x, a: ti.template()):
 @ti.func
 def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_contacts: ti.template(),
           walled: ti.template(), work: ti.template(), cell_of: ti.template(), slot: ti.template(),
-          cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy, inv_cw, inv_ch, dt, box_w,
+          cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy, inv_cw, inv_ch, transposed,
+          dt, box_w,
           box_h, real: ti.template(), periodic: ti.template(), uniform: ti.template(), serial: ti.template()):
     """x += v dt (wrapped into the box when periodic), counted into its grid cell; contact lists
     emptied in the same pass (see grid.enter_cells).
@@ -107,7 +108,8 @@ def _move(pos: ti.template(), vel: ti.template(), radius: ti.template(), n_conta
     work[WALLED] = 0
     enter_cells(pos.shape[0], _moved, _keep_moved,
                 (pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real, periodic, uniform),
-                cell_of, slot, cell_count, stray, parts, ncx, ncy, inv_cw, inv_ch, real, periodic, serial)
+                cell_of, slot, cell_count, stray, parts, ncx, ncy, inv_cw, inv_ch, transposed, real, periodic,
+                serial)
 
 
 @ti.func
@@ -798,7 +800,8 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
                marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
                lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
-               sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
+               sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, transposed: ti.i32,
+               rows: ti.i32,
                segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
                real: ti.template(), periodic: ti.template(), two_level: ti.template(), uniform: ti.template(),
                rounds: ti.template(), serial_from: ti.template(), first_parts: ti.template()) -> ti.i32:
@@ -811,7 +814,7 @@ def begin_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndar
     # serial_from = 0: the whole step on one thread (see backend.serial_loops).
     serial = ti.static(serial_from == 0)
     _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
-          inv_ch, dt, box_w, box_h, real, periodic, uniform, serial)
+          inv_ch, transposed, dt, box_w, box_h, real, periodic, uniform, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
     _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start,
                    sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level, uniform,
@@ -829,7 +832,8 @@ def serial_steps(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nd
                  lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
                  wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr,
                  cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64,
-                 rows: ti.i32, segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr,
+                 transposed: ti.i32, rows: ti.i32, segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64,
+                 spread: ndarr, large: ndarr,
                  parts: ndarr, steps: ti.i32, real: ti.template(), periodic: ti.template(),
                  two_level: ti.template(), uniform: ti.template(), rounds: ti.template()) -> ti.i32:
     """Up to `steps` steps of `begin_step` on one thread (`serial_from` 0), in one launch: a
@@ -842,7 +846,7 @@ def serial_steps(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: nd
     ti.loop_config(serialize=True)
     for _ in range(steps):
         _move(pos, vel, radius, n_contacts, walled, work, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy,
-              inv_cw, inv_ch, dt, box_w, box_h, real, periodic, uniform, True)
+              inv_cw, inv_ch, transposed, dt, box_w, box_h, real, periodic, uniform, True)
         finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, True)
         _scan_contacts(pos, vel, radius, contacts, n_contacts, marked, work, cell_of, cell_start,
                        sorted_ids, ncx, ncy, rows, segs, box_w, box_h, spread, large, real, periodic, two_level,
@@ -987,7 +991,8 @@ def team_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr
               marked: ndarr, contacts: ti.types.ndarray(ndim=2), n_contacts: ndarr,
               lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
               wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
-              sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, rows: ti.i32,
+              sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, transposed: ti.i32,
+               rows: ti.i32,
               segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
               sync: ndarr, real: ti.template(), periodic: ti.template(), two_level: ti.template(),
               uniform: ti.template(), rounds: ti.template(), serial: ti.template()) -> ti.i32:
@@ -1017,7 +1022,7 @@ def team_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr
             moved = ti.static((pos, vel, radius, n_contacts, walled, work, ti.cast(dt, real), box_w, box_h, real,
                                periodic, uniform))
             stage(sync, 0, np_, _team_move, (moved, cell_of, slot, cell_count, sorted_ids, parts, ncx, ncy, inv_cw,
-                                             inv_ch, real, periodic), me)
+                                             inv_ch, transposed, real, periodic), me)
             stage(sync, 1, 1, _team_strays, (cell_of, slot, cell_count, sorted_ids, parts), me)
             nchunks = chunks_of(ncells, ti.static(_scan_shape()[0]))
             stage(sync, 2, nchunks, _team_totals, (cell_count, cell_start, ncells), me)

@@ -62,7 +62,8 @@ def _keep_nothing(i, p, a: ti.template()):
 @ti.func
 def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template(), slot: ti.template(),
                 cell_count: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), parts: ti.template(),
-                ncx, ncy, inv_cw, inv_ch, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
+                ncx, ncy, inv_cw, inv_ch, transposed, masked: ti.template(), periodic: ti.template(),
+                serial: ti.template()):
     """The grid's stages as top-level loops, so that a scheme can run them inside its own kernel;
     with `serial`, every loop on one thread (see backend.serial_loops). Masked (circles whose
     `include` is 0 left out, cell_of -1): an atomic add per circle, as on a GPU.
@@ -74,22 +75,26 @@ def build_cells(pos: ti.template(), include: ti.template(), cell_of: ti.template
         ti.loop_config(serialize=serial)
         for i in range(pos.shape[0]):
             if include[i] != 0:
-                enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
+                enter_cell(i, pos[i], cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, transposed, periodic)
             else:
                 cell_of[i] = -1
     else:
         enter_cells(pos.shape[0], _position, _keep_nothing, (pos,), cell_of, slot, cell_count, sorted_ids, parts, ncx,
-                    ncy, inv_cw, inv_ch, ti.f64, periodic, serial)
+                    ncy, inv_cw, inv_ch, transposed, ti.f64, periodic, serial)
     finish_cells(cell_of, slot, cell_count, cell_start, sorted_ids, ncx, ncy, periodic, serial)
 
 
 @ti.func
-def cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic: ti.template()):
-    """The cell of a circle at p."""
+def cell_at(p, ncx, ncy, inv_cw, inv_ch, transposed, periodic: ti.template()):
+    """The cell of a circle at p. The grid's x axis is the box's x, or its y when `transposed`
+    is not 0 (see `Grid`); inv_cw and inv_ch are the cells per unit length along the grid's x
+    and y."""
+    u = ti.select(transposed != 0, p[1], p[0])
+    v = ti.select(transposed != 0, p[0], p[1])
     # Positions may sit a round-off outside the box (or outside [0, W) in a
     # periodic box before wrapping): clamp and wrap the cell coordinates.
-    cx = ti.cast(ti.floor(ti.cast(p[0], ti.f64) * inv_cw), ti.i32)
-    cy = ti.cast(ti.floor(ti.cast(p[1], ti.f64) * inv_ch), ti.i32)
+    cx = ti.cast(ti.floor(ti.cast(u, ti.f64) * inv_cw), ti.i32)
+    cy = ti.cast(ti.floor(ti.cast(v, ti.f64) * inv_ch), ti.i32)
     cx = ti.min(ti.max(cx, 0), ncx - 1)
     cy = ti.min(ti.max(cy, 0), ncy - 1)
     return cell_index(cx, cy, ncx, periodic)
@@ -97,9 +102,9 @@ def cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic: ti.template()):
 
 @ti.func
 def enter_cell(i, p, cell_of: ti.template(), slot: ti.template(), cell_count: ti.template(), ncx, ncy, inv_cw,
-               inv_ch, periodic: ti.template()):
+               inv_ch, transposed, periodic: ti.template()):
     """Count circle i, at p, into its cell with an atomic add."""
-    c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+    c = cell_at(p, ncx, ncy, inv_cw, inv_ch, transposed, periodic)
     cell_of[i] = c
     slot[i] = ti.atomic_add(cell_count[c], 1)
 
@@ -152,7 +157,8 @@ def _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count: ti.template(), sl
 @ti.func
 def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(), cell_of: ti.template(),
                 slot: ti.template(), cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy,
-                inv_cw, inv_ch, real: ti.template(), periodic: ti.template(), serial: ti.template()):
+                inv_cw, inv_ch, transposed, real: ti.template(), periodic: ti.template(),
+                serial: ti.template()):
     """The first stage for every circle i < n, fused into a scheme's own pass (such as a move):
     p = place(i, args) says where circle i is (it must store nothing but rarely), keep(i, p,
     args) stores what the pass stores for it, and the grid gets its cell in cell_of[i] and its
@@ -178,7 +184,7 @@ def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(
         for i in range(n):
             p = place(i, args)
             keep(i, p, args)
-            enter_cell(i, p, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, periodic)
+            enter_cell(i, p, cell_of, slot, cell_count, ncx, ncy, inv_cw, inv_ch, transposed, periodic)
     else:
         ti.loop_config(serialize=True)
         for _ in range(1):
@@ -187,7 +193,7 @@ def enter_cells(n, place: ti.template(), keep: ti.template(), args: ti.template(
         for it in range(np_ * PART_ITERATIONS):
             if it % PART_ITERATIONS == 0:
                 count_part(it // PART_ITERATIONS, n, place, keep, args, cell_of, slot, cell_count, stray, parts, ncx,
-                           ncy, inv_cw, inv_ch, real, periodic)
+                           ncy, inv_cw, inv_ch, transposed, real, periodic)
         ti.loop_config(serialize=True)
         for _ in range(1):
             count_strays(n, cell_of, slot, cell_count, stray, parts)
@@ -209,7 +215,7 @@ def owned_starts(n, cell_of: ti.template(), parts: ti.template(), ncx, ncy, peri
 @ti.func
 def count_part(k, n, place: ti.template(), keep: ti.template(), args: ti.template(), cell_of: ti.template(),
                slot: ti.template(), cell_count: ti.template(), stray: ti.template(), parts: ti.template(), ncx, ncy,
-               inv_cw, inv_ch, real: ti.template(), periodic: ti.template()):
+               inv_cw, inv_ch, transposed, real: ti.template(), periodic: ti.template()):
     """Part k of `enter_cells` on a CPU (one thread): its circles placed and kept, and counted
     into the cells the part owns, the others set aside as strays."""
     np_ = ti.static(count_parts())
@@ -226,7 +232,7 @@ def count_part(k, n, place: ti.template(), keep: ti.template(), args: ti.templat
             p = place(first + u, args)
             ps[u, 0] = p[0]
             ps[u, 1] = p[1]
-            cs[u] = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+            cs[u] = cell_at(p, ncx, ncy, inv_cw, inv_ch, transposed, periodic)
         for u in ti.static(range(g)):
             keep(first + u, ti.Vector([ps[u, 0], ps[u, 1]], dt=real), args)
         for u in ti.static(range(g)):
@@ -236,7 +242,7 @@ def count_part(k, n, place: ti.template(), keep: ti.template(), args: ti.templat
     for i in range(lo + (hi - lo) // g * g, hi):
         p = place(i, args)
         keep(i, p, args)
-        c = cell_at(p, ncx, ncy, inv_cw, inv_ch, periodic)
+        c = cell_at(p, ncx, ncy, inv_cw, inv_ch, transposed, periodic)
         cell_of[i] = c
         strays = _count_owned(i, c, own_lo, own_hi, lo, strays, cell_count, slot, stray)
     parts[np_ + 1 + k] = strays
@@ -493,19 +499,32 @@ def _build(pos: ti.types.ndarray(ndim=1), include: ti.types.ndarray(ndim=1), cel
            slot: ti.types.ndarray(ndim=1), cell_count: ti.types.ndarray(ndim=1),
            cell_start: ti.types.ndarray(ndim=1), sorted_ids: ti.types.ndarray(ndim=1),
            parts: ti.types.ndarray(ndim=1), ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64,
-           masked: ti.template(), periodic: ti.template(), serial: ti.template()):
+           transposed: ti.i32, masked: ti.template(), periodic: ti.template(), serial: ti.template()):
     build_cells(pos, include, cell_of, slot, cell_count, cell_start, sorted_ids, parts, ncx, ncy, inv_cw, inv_ch,
-                masked, periodic, serial)
+                transposed, masked, periodic, serial)
 
 
 class Grid:
-    """Cell lists over a fixed number of circles, with a fixed cell capacity."""
+    """Cell lists over a fixed number of circles, with a fixed cell capacity.
 
-    def __init__(self, n: int, box, periodic: bool, max_cells=None, serial=False):
-        """`serial`: build on one thread (see backend.serial_loops)."""
+    The cells are numbered row by row along the grid's x axis (`geometry.cell_index`), which is
+    the box's x, or with `transposed` the box's y: then the grid's rows are the box's columns
+    of cells. Only the numbering changes: the cells are the same, and a search visits the same
+    neighbours (a search of 3 x 3 cells reads three rows, in another order). A scheme that
+    splits the circles into strips of whole rows (`event.split_parts`) has borders as long as
+    a row, so a box wider than tall is better numbered along its y axis (see
+    `simulation.TRANSPOSE_WIDE_GRIDS`).
+    """
+
+    def __init__(self, n: int, box, periodic: bool, max_cells=None, serial=False, transposed=False):
+        """`serial`: build on one thread (see backend.serial_loops); `transposed`: the grid's x
+        axis is the box's y (see above)."""
         self.n = n
         self.serial = bool(serial)
+        self.transposed = bool(transposed)
         self.box = (float(box[0]), float(box[1]))
+        # The box's extent along the grid's x and y axes.
+        self.extent = self.box[::-1] if self.transposed else self.box
         self.periodic = periodic
         self.max_cells = max_cells or max(64, 3 * n)
         self.cell_of = ti.ndarray(ti.i32, shape=n)
@@ -534,7 +553,7 @@ class Grid:
         return shape
 
     def _shape_for(self, reach: float):
-        w, h = self.box
+        w, h = self.extent
         reach = max(reach, 1e-300)
         ncx = max(1, min(int(w / reach), 1 << 20))
         ncy = max(1, min(int(h / reach), 1 << 20))
@@ -547,9 +566,9 @@ class Grid:
         """Set the cells for `reach`; returns the arguments of `build_cells` after pos (no mask)."""
         self.ncx, self.ncy = self.shape_for(reach)
         self.reach = reach
-        w, h = self.box
+        w, h = self.extent
         return (self._dummy_mask, self.cell_of, self.slot, self.cell_count, self.cell_start, self.sorted_ids,
-                self.ncx, self.ncy, self.ncx / w, self.ncy / h)
+                self.ncx, self.ncy, self.ncx / w, self.ncy / h, int(self.transposed))
 
     def build(self, pos, reach, include=None):
         """Sort the circles into cells at least `reach` wide; `include` (int ndarray) masks circles out."""

@@ -106,6 +106,12 @@ DISCRETE_TEAM = True
 DISCRETE_TEAM_SERIAL = False
 #: Steps between reorderings of the arrays by grid cell (neighbours close in memory).
 REORDER_EVERY = 16
+#: In a box wider than tall, a one-level grid numbers its cells along the box's y axis
+#: (`grid.Grid`, transposed): the event queue's parts are strips of whole rows of cells, and
+#: their borders, searched at every split, are then as long as the box's shorter side. The
+#: same state bit for bit either way; the event scheme at 1e6 in a 16:9 box makes about 5%
+#: more circle-steps (see bench/PERFORMANCE.md). A two-level grid keeps the box's axes.
+TRANSPOSE_WIDE_GRIDS = True
 #: Steps in a row that `advance` lets end at their start (cut by a collision that would make
 #: a circle faster than the grid allows) before it stops as stuck: each makes the largest
 #: speed at least SPEED_MARGIN times larger, 1.1^1000 = 2.5e41 times in all.
@@ -715,7 +721,11 @@ class Simulation:
         self.wall_impulse = ti.ndarray(ti.f64, shape=n)
         # Small scenes on a CPU: every per-step loop on one thread (backend.serial_loops).
         self._serial = serial_loops(n, scheme)
-        self.grid = Grid(n, self.box, self.periodic, serial=self._serial)
+        # The event queue (CPU) and the discrete scheme may use a two-level grid; the rounds do not.
+        self._event_queue = scheme == "event" and EVENT_QUEUE_ON_CPU and current_arch() == "cpu"
+        self._choose_levels(self._event_queue or scheme == "discrete")
+        transposed = TRANSPOSE_WIDE_GRIDS and self.box[0] > self.box[1] and not self._two_level
+        self.grid = Grid(n, self.box, self.periodic, serial=self._serial, transposed=transposed)
         self._upload(np.asarray(pos, dtype=np.float64), np.asarray(vel, dtype=np.float64), np.zeros(n, np.int32),
                      np.zeros(n, np.int32), np.zeros(n), np.zeros(n))
         self._speed_out = ti.ndarray(ti.f64, shape=2)
@@ -737,10 +747,8 @@ class Simulation:
         self._log_i = ti.ndarray(ti.i32, shape=cap)
         self._log_j = ti.ndarray(ti.i32, shape=cap)
         if scheme == "event":
-            self._event_queue = EVENT_QUEUE_ON_CPU and current_arch() == "cpu"
             self._alloc_event_arrays()
-            # The queue's grid may have two levels (`event.build_coarse`); the rounds' has one.
-            self._setup_two_level(self._event_queue)
+            self._setup_two_level()
             self._setup_parts()
         self._steps_at_once = 1
         if scheme == "discrete":
@@ -764,7 +772,7 @@ class Simulation:
             self._walled = ti.ndarray(ti.i32, shape=n)
             for arr in (self._picked, self._marked):
                 reductions.fill_i32(arr, 0)
-            self._setup_two_level(True)
+            self._setup_two_level()
             # As the kernels see them: radii and inverse masses rounded to the precision.
             radii = self._radius.astype(self._np_real)
             inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
@@ -823,20 +831,25 @@ class Simulation:
         rows = -(-ncy // parts)
         return -(-ncy // rows), rows
 
-    def _setup_two_level(self, allowed):
+    def _choose_levels(self, allowed):
         """Choose the grid: one level (cells as wide as the largest diameter), or, when `allowed`,
         two (see LARGE_RADIUS_RATIO, discrete.wide_row and event.build_coarse)."""
         stored = self._radius.astype(self._np_real).astype(np.float64)  # radii as the kernels see them
         r_cut = float(stored.max())
         small = stored[stored <= LARGE_RADIUS_RATIO * float(np.median(stored))]
-        n_large = self.n - small.size
-        self._two_level = allowed and (not self.periodic) and 0 < n_large <= TWO_LEVEL_MAX_FRACTION * self.n
+        self._n_large = self.n - small.size
+        self._two_level = bool(allowed and (not self.periodic) and
+                               0 < self._n_large <= TWO_LEVEL_MAX_FRACTION * self.n)
         if self._two_level:
             r_cut = float(small.max())
         self._r_cut = r_cut
+
+    def _setup_two_level(self):
+        """The arrays of the grid's levels (`_choose_levels`)."""
+        n_large = self._n_large
         self._large = ti.ndarray(ti.i32, shape=n_large if self._two_level else 1)
         self._spread = ti.ndarray(self._real, shape=2)
-        self._spread.from_numpy(np.array([r_cut, stored.max()], dtype=self._np_real))
+        self._spread.from_numpy(np.array([self._r_cut, self._radius.max()], dtype=self._np_real))
         # The coarse cells of the event queue's two-level grid (`event.build_coarse`), grown on demand.
         self._coarse_start = ti.ndarray(ti.i32, shape=1)
         self._coarse_ids = ti.ndarray(ti.i32, shape=n_large if self._two_level and self.scheme == "event" else 1)
@@ -882,12 +895,14 @@ class Simulation:
         return ti.ndarray(arr.dtype, shape=arr.shape)
 
     def _cell_order(self, pos):
-        """Creation ids sorted by grid cell (row-major cells two largest radii wide), ties by id."""
-        w, h = self.box
+        """Creation ids sorted by grid cell (cells two largest radii wide, numbered as the grid numbers
+        its cells), ties by id."""
+        w, h = self.grid.extent
         side = max(2.0 * self._rmax, math.sqrt(w * h / max(self.n, 1)))
         ncx, ncy = max(1, int(w / side)), max(1, int(h / side))
-        cx = np.clip((pos[:, 0] * (ncx / w)).astype(np.int64), 0, ncx - 1)
-        cy = np.clip((pos[:, 1] * (ncy / h)).astype(np.int64), 0, ncy - 1)
+        u, v = (pos[:, 1], pos[:, 0]) if self.grid.transposed else (pos[:, 0], pos[:, 1])
+        cx = np.clip((u * (ncx / w)).astype(np.int64), 0, ncx - 1)
+        cy = np.clip((v * (ncy / h)).astype(np.int64), 0, ncy - 1)
         return np.lexsort((np.arange(self.n), cy * ncx + cx))
 
     def _upload(self, pos, vel, pair_count, wall_count, virial, wall_impulse):

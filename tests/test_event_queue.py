@@ -32,7 +32,11 @@ SCENES = {
 #: circle: a slow circle by a border reaches far only when a fast one can hit it first.
 PARTS_SCENES = dict(SCENES, **{"walls-f32-radius": dict(SCENES["walls-f64-radius"], precision="f32"),
                                "walls-f32-slow-fast": dict(SCENES["walls-f32-equal"], speed=(0.0, 1.0),
-                                                           mass="radius")})
+                                                           mass="radius"),
+                               # Wider than tall: the grid's rows are the box's columns
+                               # (`simulation.TRANSPOSE_WIDE_GRIDS`), the strips vertical.
+                               "walls-f32-wide": dict(SCENES["walls-f32-equal"], box=(1.6, 0.4)),
+                               "periodic-f64-wide": dict(SCENES["periodic-f64-area"], box=(1.6, 0.625))})
 
 
 def on_threads(monkeypatch):
@@ -165,9 +169,9 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 @pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-radius", 4),
                                          ("periodic-f64-area", 4), ("walls-f32-slow-fast", 4),
                                          ("walls-f64-radius", 16), ("walls-f32-radius", 16),
-                                         ("walls-f32-equal", 10**9)],
+                                         ("walls-f32-equal", 10**9), ("walls-f32-wide", 4), ("periodic-f64-wide", 4)],
                          ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "cut-windows",
-                              "cut-windows-f32", "no-split"])
+                              "cut-windows-f32", "no-split", "wide", "wide-periodic"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     """Circles split into parts of about 200 (event.split_parts), each part's
     events run from its own queue, the parts shared among the threads (event.queue_parts):
@@ -203,6 +207,7 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     monkeypatch.setattr(simulation.Simulation, "_restore", counted_restore)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim._part_shape()[0] >= 4
+    assert sim.grid.transposed == name.endswith("-wide") == rounds.grid.transposed
     if claims in (4, 16):
         assert sim.parts_run >= sim.steps  # every step ran in parts, one window or more
     else:
@@ -543,7 +548,10 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
     one = make(0.0, True)
     rounds = make(0.05, False)
     assert two._two_level and not one._two_level and not rounds._two_level
-    assert two.grid.ncx > 3 * one.grid.ncx  # the fine cells are sized for the small circles
+    # In this 1.5:1 box a one-level grid runs along the box's y (`simulation.TRANSPOSE_WIDE_GRIDS`),
+    # a two-level one keeps the box's axes: the same pairs either way.
+    assert not two.grid.transposed and one.grid.transposed and rounds.grid.transposed
+    assert two.grid.ncx > 3 * one.grid.ncy  # the fine cells along x are sized for the small circles
     coarse_start, coarse_ids, ncx_c, ncy_c, mx, my = two._levels[:6]
     assert mx > 3 and my > 3
     listed = coarse_ids.to_numpy()

@@ -57,8 +57,11 @@ def check_prefix_sum(chunk, group, ncells, serial):
     assert (count[ncells:] == 7).all() and (start[ncells + 1:] == -5).all()  # ... and nothing past them is touched
 
 
-def cell_xy(p, ncx, ncy, box):
-    """The cell coordinates (cx, cy) of positions p on ncx x ncy cells over the box."""
+def cell_xy(p, ncx, ncy, box, transposed=False):
+    """The cell coordinates (cx, cy) along the grid's axes of positions p on ncx x ncy cells over
+    the box: the box's x and y, or y and x when `transposed` (`grid.Grid`)."""
+    if transposed:
+        p, box = p[:, ::-1], box[::-1]
     cx = np.minimum((p[:, 0] * ncx / box[0]).astype(int), ncx - 1)
     cy = np.minimum((p[:, 1] * ncy / box[1]).astype(int), ncy - 1)
     return cx, cy
@@ -68,7 +71,7 @@ def check_walled_cells(g, p, box):
     """The cells of grid g, built on positions p in a walled box, list every circle once, in its
     own cell."""
     cell_of, cell_start, sorted_ids = g.cells_numpy()
-    cx, cy = cell_xy(p, g.ncx, g.ncy, box)
+    cx, cy = cell_xy(p, g.ncx, g.ncy, box, g.transposed)
     # Walled layout: rows of ncx + 1 cells, the first of each empty, an empty row below and above.
     expected = (cy + 1) * (g.ncx + 1) + cx + 1
     ncells = (g.ncy + 2) * (g.ncx + 1) + 1
@@ -79,19 +82,23 @@ def check_walled_cells(g, p, box):
     assert (cell_of[sorted_ids] == np.repeat(np.arange(ncells), np.diff(cell_start))).all()
 
 
-def test_cells_list_every_circle_once(circles_cpu):
+@pytest.mark.parametrize("transposed", [False, True])
+def test_cells_list_every_circle_once(circles_cpu, transposed):
+    """Every circle once, in its cell; transposed, the grid's rows are the box's columns: 25 rows
+    of 40 cells become 40 rows of 25."""
     rng = np.random.default_rng(5)
     n, box = 5000, (40.0, 25.0)
     pos = ti.Vector.ndarray(2, ti.f64, shape=n)
     p = rng.uniform((0, 0), box, (n, 2))
     pos.from_numpy(p)
-    g = grid.Grid(n, box, periodic=False)
+    g = grid.Grid(n, box, periodic=False, transposed=transposed)
     g.build(pos, 1.0)
+    assert (g.ncx, g.ncy) == ((25, 40) if transposed else (40, 25))
     check_walled_cells(g, p, box)
 
 
-@pytest.mark.parametrize("serial", [False, True])
-def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
+@pytest.mark.parametrize("serial,transposed", [(False, False), (True, False), (False, True)])
+def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial, transposed):
     """A CPU counts circles into cells in parts without atomics (grid.enter_cells): each part
     owns the cells from where its first circle was at the last count, and circles in cells
     that another part owns are counted afterwards as strays. Whatever cell_of holds on entry
@@ -99,7 +106,7 @@ def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
     its own cell; circles in cell order must leave few strays (the point of the parts)."""
     rng = np.random.default_rng(11)
     n, box = 20_003, (120.0, 70.0)  # not a multiple of the group of 8 circles
-    g = grid.Grid(n, box, periodic=False, serial=serial)
+    g = grid.Grid(n, box, periodic=False, serial=serial, transposed=transposed)
     pos = ti.Vector.ndarray(2, ti.f64, shape=n)
 
     def check(p):
@@ -114,8 +121,8 @@ def test_cells_counted_in_parts_list_every_circle_once(circles_cpu, serial):
     garbage = rng.integers(-10**9, 10**9, n).astype(np.int32)
     g.cell_of.from_numpy(garbage)
     check(scattered)
-    cy = np.floor(scattered[:, 1] * g.ncy / box[1])
-    ordered = scattered[np.lexsort((scattered[:, 0], cy))]
+    cx, cy = cell_xy(scattered, g.ncx, g.ncy, box, transposed)
+    ordered = scattered[np.lexsort((cx, cy))]
     check(ordered)  # the parts' cells now come from the ordered positions
     strays = check(ordered + rng.uniform(-0.05, 0.05, (n, 2)).clip(-ordered, np.array(box) - ordered - 1e-9))
     assert strays <= 0.01 * n
@@ -131,25 +138,27 @@ def test_cells_counted_with_atomics_as_on_a_gpu(circles_cpu, monkeypatch):
 
     @ti.kernel
     def build(pos: nd, cell_of: nd, slot: nd, count: nd, start: nd, sorted_ids: nd, parts: nd, ncx: ti.i32,
-              ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64):
-        grid.build_cells(pos, parts, cell_of, slot, count, start, sorted_ids, parts, ncx, ncy, inv_cw, inv_ch, False,
-                         False, False)
+              ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, transposed: ti.i32):
+        grid.build_cells(pos, parts, cell_of, slot, count, start, sorted_ids, parts, ncx, ncy, inv_cw, inv_ch,
+                         transposed, False, False, False)
 
     rng = np.random.default_rng(12)
     n, box = 7001, (60.0, 35.0)
     p = rng.uniform((0, 0), box, (n, 2))
-    g = grid.Grid(n, box, periodic=False)
     pos = ti.Vector.ndarray(2, ti.f64, shape=n)
     pos.from_numpy(p)
-    _, cell_of, slot, count, start, sorted_ids, ncx, ncy, inv_cw, inv_ch = g.prepare(1.0)
-    assert g.parts.shape == (1,)  # sized by the patched count_parts: no parts
-    build(pos, cell_of, slot, count, start, sorted_ids, g.parts, ncx, ncy, inv_cw, inv_ch)
-    check_walled_cells(g, p, box)
+    for transposed in (False, True):
+        g = grid.Grid(n, box, periodic=False, transposed=transposed)
+        _, cell_of, slot, count, start, sorted_ids, *shape = g.prepare(1.0)
+        assert g.parts.shape == (1,)  # sized by the patched count_parts: no parts
+        build(pos, cell_of, slot, count, start, sorted_ids, g.parts, *shape)
+        check_walled_cells(g, p, box)
 
 
 @pytest.mark.parametrize("periodic", [False, True])
-@pytest.mark.parametrize("box", [(40.0, 25.0), (2.5, 7.0), (1.0, 1.0)])
-def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
+@pytest.mark.parametrize("box,transposed", [((40.0, 25.0), False), ((40.0, 25.0), True), ((2.5, 7.0), False),
+                                            ((7.0, 2.5), True), ((1.0, 1.0), False)])
+def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box, transposed):
     """The slot ranges of `neighbour_range` list exactly the circles of the 3 x 3 cells around
     each circle's cell (each once, the block wrapped in a periodic box and cut at the walls),
     and the forward half (`forward_range`, walls, or periodic on 3 x 3 cells and more) lists
@@ -160,7 +169,7 @@ def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
     pos = ti.Vector.ndarray(2, ti.f64, shape=n)
     p = rng.uniform((0, 0), box, (n, 2))
     pos.from_numpy(p)
-    g = grid.Grid(n, box, periodic=periodic)
+    g = grid.Grid(n, box, periodic=periodic, transposed=transposed)
     g.build(pos, 1.0)
     rows, segs = spans(g.ncx, g.ncy, periodic)
     full = ti.ndarray(ti.i32, shape=(n, n + 1))
@@ -197,7 +206,7 @@ def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box):
     ranges(*g.args(), full, fwd)
     full, fwd = full.to_numpy(), fwd.to_numpy()
     ncx, ncy = g.ncx, g.ncy
-    cx, cy = cell_xy(p, ncx, ncy, box)
+    cx, cy = cell_xy(p, ncx, ncy, box, transposed)
 
     def near(a, b, m):  # cells a and b within one cell of each other along an axis of m cells
         d = np.abs(a - b)
@@ -244,7 +253,9 @@ def test_discrete_two_level_grid_matches_one_level(circles_cpu, monkeypatch, pre
     two, most = run(0.05)
     one, _ = run(0.0)
     assert two._two_level and not one._two_level
-    assert two.grid.ncx > 3 * one.grid.ncx  # the cells are sized for the small circles
+    # The one-level grid of this 1.5:1 box runs along the box's y (`simulation.TRANSPOSE_WIDE_GRIDS`).
+    assert one.grid.transposed and not two.grid.transposed
+    assert two.grid.ncx > 3 * one.grid.ncy  # the cells along x are sized for the small circles
     assert most > simulation.DISCRETE_CONTACTS  # some circle outgrew its contact list
     a, b = two.state(), one.state()
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
@@ -271,7 +282,8 @@ def test_reorder_keeps_the_arrays_in_cell_order(circles_cpu, scheme):
     before = sim.state()
 
     def in_order():
-        cx, cy = cell_xy(sim.pos.to_numpy().astype(np.float64), sim.grid.ncx, sim.grid.ncy, box)
+        cx, cy = cell_xy(sim.pos.to_numpy().astype(np.float64), sim.grid.ncx, sim.grid.ncy, box,
+                         sim.grid.transposed)
         return np.mean(np.diff(cy * sim.grid.ncx + cx) >= 0)
 
     assert in_order() < 0.8  # the order the circles were created in
@@ -281,3 +293,43 @@ def test_reorder_keeps_the_arrays_in_cell_order(circles_cpu, scheme):
     assert in_order() > 0.999
     after = sim.state()
     assert np.array_equal(before.pos, after.pos) and np.array_equal(before.vel, after.vel)
+
+
+@pytest.mark.parametrize("scheme,boundary,precision", [("event", "walls", "f32"), ("event", "periodic", "f64"),
+                                                       ("discrete", "walls", "f32"), ("discrete", "periodic", "f32")])
+def test_wide_box_grid_along_y_gives_the_same_state(circles_cpu, monkeypatch, scheme, boundary, precision):
+    """In a box wider than tall the grid numbers its cells along the box's y
+    (`simulation.TRANSPOSE_WIDE_GRIDS`): the event queue's parts become vertical strips. Only the
+    numbering changes, so 40 steps (two reorders of the arrays on the way) must leave the same
+    state bit for bit as the grid along x: positions, velocities, collisions and pressure sums.
+    The loops run on the CPU's threads, the event queue in parts, as a large scene's do."""
+    from circles import backend, event, simulation
+    monkeypatch.setattr(backend, "SERIAL_N", 0)
+    monkeypatch.setattr(backend, "EVENT_SERIAL_WORK", 0)
+    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    scene = circles_cpu.Scene(n=2000, box=(1.6, 0.4), radius=0.006, speed=(0.5, 1.0), boundary=boundary,
+                              scheme=scheme, precision=precision, seed=4)
+
+    def run(transpose):
+        monkeypatch.setattr(simulation, "TRANSPOSE_WIDE_GRIDS", transpose)
+        sim = circles_cpu.Simulation(scene)
+        assert sim.grid.transposed == transpose
+        sim.step(40)
+        if scheme == "event" and backend.cpu_threads() > 1:
+            assert sim._parts and sim.parts_run >= 40
+        return sim
+
+    along_y, along_x = run(True), run(False)
+    # Transposed, the strips run across the box's 1.6 width: 4 times as many rows of cells.
+    assert along_y.grid.ncy == along_x.grid.ncx and along_y.grid.ncx == along_x.grid.ncy
+    assert along_y.grid.ncy >= 4 * along_y.grid.ncx
+    a, b = along_y.state(), along_x.state()
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
+    sa, sb = along_y.stats(), along_x.stats()
+    assert sa["pair_collisions"] > 2000
+    for key in ("pair_collisions", "wall_collisions", "virial", "wall_impulse"):
+        assert sa[key] == sb[key], key
+    # A box taller than wide keeps the box's axes.
+    monkeypatch.setattr(simulation, "TRANSPOSE_WIDE_GRIDS", True)
+    tall = circles_cpu.Simulation(circles_cpu.Scene(n=500, box=(0.4, 1.6), radius=0.006, scheme=scheme, seed=4))
+    assert not tall.grid.transposed
