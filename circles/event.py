@@ -1570,7 +1570,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
                 wall_impulse: ndarr, touched: ndarr, dirty: ndarr, b_pos: ndarr, b_vel: ndarr,
                 b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
-                label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, cell_of: ndarr, cell_start: ndarr,
+                label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, speed_out: ndarr, cell_of: ndarr,
+                cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
                 parts: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, per_bucket: ti.i32,
@@ -1585,7 +1586,10 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     b_wall_impulse) before its events run, as it reads them for their walls: a collision that
     would outrun the grid, in any window, redoes the step from it (`Simulation._queue_parts_step`).
     Circles stay at their clocks (`finish` moves them to the step's end). result[k]: what
-    `queue_step` returns, for part k. Part k's queue uses the slots info[k] to info[k + 1] of
+    `queue_step` returns, for part k. In the step's last window (`until` = `t_end`) a part that
+    reached the end (no collision that would outrun the grid) also moves its circles there and
+    measures their largest speed (`finish`, while its arrays are in the cache), into speed_out as
+    `finish` leaves it. Part k's queue uses the slots info[k] to info[k + 1] of
     heap, heap_t and pending, and the buckets from info[k] // per_bucket + k of head (one per
     `per_bucket` circles, the width the head array was made for); a part stops after
     `most_per_circle` events a circle. Both come as arguments, not as the module's constants
@@ -1594,6 +1598,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     n = pos.shape[0]
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     info[3 * parts + 1] = 0  # parts taken
+    speed_out[0] = 0.0
+    speed_out[1] = 0.0
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
             box = ti.Vector([box_w, box_h], dt=real)
@@ -1647,6 +1653,11 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
                                          (label, touched, dirty))
                 result[k] = reached
+                if until >= t_end and reached >= t_end:
+                    for q in range(s_lo, items):
+                        s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
+                        if take:
+                            _finish_one(i, pos, vel, tau, horizon, box, periodic, speed_out, True)
 
 @launch.kernel
 def finish(pos: ndarr, vel: ndarr, tau: ndarr, t_end: ti.f64, box_w: ti.f64, box_h: ti.f64, speed_out: ndarr,
@@ -1677,19 +1688,27 @@ def _finish(pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon,
     ti.loop_config(serialize=serial)
     for i in range(pos.shape[0]):
         box = ti.Vector([box_w, box_h], dt=real)
-        v = vel[i]
-        x = pos[i] + v * (horizon - tau[i])
-        if ti.static(periodic):
-            x -= box * ti.floor(x / box)
-            # x / box can round up to exactly 1 for x a hair below 0.
-            for a in ti.static(range(2)):
-                if x[a] >= box[a]:
-                    x[a] -= box[a]
-        pos[i] = x
-        tau[i] = 0.0
+        _finish_one(i, pos, vel, tau, horizon, box, periodic, speed_out, speed)
         if ti.static(len(clear) > 0):
             clear[0][i] = ti.cast(NEVER, real)  # as `_first_wall_event` and the set-up write it
             clear[1][i] = NO_EVENT
-        if ti.static(speed):
-            s, bad = speed_of(x, v)
-            offer_speed(speed_out, s, bad)
+
+
+@ti.func
+def _finish_one(i, pos: ti.template(), vel: ti.template(), tau: ti.template(), horizon, box,
+                periodic: ti.template(), speed_out: ti.template(), speed: ti.template()):
+    """Circle i of `_finish`: moved to `horizon` (wrapped into the box when periodic), its clock
+    0, and with `speed` its |v|^2 offered to speed_out."""
+    v = vel[i]
+    x = pos[i] + v * (horizon - tau[i])
+    if ti.static(periodic):
+        x -= box * ti.floor(x / box)
+        # x / box can round up to exactly 1 for x a hair below 0.
+        for a in ti.static(range(2)):
+            if x[a] >= box[a]:
+                x[a] -= box[a]
+    pos[i] = x
+    tau[i] = 0.0
+    if ti.static(speed):
+        s, bad = speed_of(x, v)
+        offer_speed(speed_out, s, bad)

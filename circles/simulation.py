@@ -1358,7 +1358,8 @@ class Simulation:
                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                   self.wall_impulse, self._touched, self._dirty_w,
                                   *(b[name] for name in PARTS_BACKUP_ORDER), self._label, self._claimed,
-                                  self._part_info, self._part_result, *cell_args, rows_per, parts, w, hgt, end,
+                                  self._part_info, self._part_result, self._speed_out, *cell_args, rows_per,
+                                  parts, w, hgt, end,
                                   min(t1, end), vlim, self._time, int(done == 0), self._counters, self._log_t,
                                   self._log_i, self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE,
                                   self._real, record, periodic)
@@ -1384,9 +1385,9 @@ class Simulation:
             end = cut
         h = end
         self.rounds += 1
-        self._known_speed = reductions.speed_from(
-            event.finish(self.pos, self.vel, self.tau, h, w, hgt, self._speed_out, self._real, periodic, self._serial,
-                         True))
+        # The last window's parts moved their circles to the end and measured the largest speed
+        # (`event.queue_parts`); reading their results synchronised.
+        self._known_speed = reductions.speed_in(self._speed_view)
         return h
 
     def _jammed(self):
