@@ -115,7 +115,7 @@ def test_kept_runs_read_back_from_their_csvs():
     intel, arch = targets.read_run(ROOT / "outputs" / "bench" / "intel-xeon-processor")
     rows = targets.evaluate(intel, arch)
     assert [met for _, _, met in rows] == ["yes", "no", "yes", "yes", "yes", "yes", "yes", "yes"]
-    assert rows[0][1] == "49.7 M [41.9 M, 51.1 M]"
-    assert rows[1][1] == "11.3 M [9.81 M, 11.7 M] and 1.1 M collisions/s"
-    assert rows[2][1].startswith("discrete 42.7 times [36.2, 48.4]")
-    assert rows[3][1] == "discrete 1.46 (1e4 against 1e5); event 1.38 (1e5 against 1e4)"
+    assert rows[0][1] == "46.3 M [45.2 M, 46.9 M]"
+    assert rows[1][1] == "12 M [11.8 M, 12.3 M] and 1.17 M collisions/s"
+    assert rows[2][1].startswith("discrete 45.4 times [44.2, 47.2]")
+    assert rows[3][1] == "discrete 1.46 (1e4 against 1e5); event 1.35 (1e5 against 1e4)"
