@@ -992,9 +992,8 @@ def team_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, ids: ndarr
               lists: ti.types.ndarray(ndim=2), work: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
               wall_impulse: ndarr, walled: ndarr, cell_of: ndarr, slot: ndarr, cell_count: ndarr, cell_start: ndarr,
               sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, inv_cw: ti.f64, inv_ch: ti.f64, transposed: ti.i32,
-               rows: ti.i32,
-              segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr, parts: ndarr,
-              sync: ndarr, real: ti.template(), periodic: ti.template(), two_level: ti.template(),
+              rows: ti.i32, segs: ti.i32, dt: ti.f64, box_w: ti.f64, box_h: ti.f64, spread: ndarr, large: ndarr,
+              parts: ndarr, sync: ndarr, real: ti.template(), periodic: ti.template(), two_level: ti.template(),
               uniform: ti.template(), rounds: ti.template(), serial: ti.template()) -> ti.i32:
     """`begin_step` on a CPU's threads as one team (`circles.team`): the same stages, the same
     state bit for bit, with one start of the thread pool instead of one per loop. The first

@@ -1585,7 +1585,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     copies its circles' state at the step's start (every clock 0) into the backup (b_pos to
     b_wall_impulse) before its events run, as it reads them for their walls: a collision that
     would outrun the grid, in any window, redoes the step from it (`Simulation._queue_parts_step`).
-    Circles stay at their clocks (`finish` moves them to the step's end). result[k]: what
+    Circles stay at their clocks (but see the last window, below). result[k]: what
     `queue_step` returns, for part k. In the step's last window (`until` = `t_end`) a part that
     reached the end (no collision that would outrun the grid) also moves its circles there and
     measures their largest speed (`finish`, while its arrays are in the cache), into speed_out as

@@ -110,7 +110,8 @@ REORDER_EVERY = 16
 #: (`grid.Grid`, transposed): the event queue's parts are strips of whole rows of cells, and
 #: their borders, searched at every split, are then as long as the box's shorter side. The
 #: same state bit for bit either way; the event scheme at 1e6 in a 16:9 box makes about 5%
-#: more circle-steps (see bench/PERFORMANCE.md). A two-level grid keeps the box's axes.
+#: more circle-steps (see bench/PERFORMANCE.md). A two-level grid keeps the box's axes (the
+#: blocks its large circles search are sized along them: `event._runs`, `discrete.wide_reach`).
 TRANSPOSE_WIDE_GRIDS = True
 #: Steps in a row that `advance` lets end at their start (cut by a collision that would make
 #: a circle faster than the grid allows) before it stops as stuck: each makes the largest
