@@ -27,7 +27,6 @@ second at once; neither cuts short the writing of a frame or the finishing of th
 
 import argparse
 import array
-import collections
 import contextlib
 import importlib
 import math
@@ -505,7 +504,6 @@ class Speeds:
     def __init__(self, n):
         self.n = n
         self.rates = array.array("d")  # of the frames that took steps: 8 bytes a frame
-        self.last = collections.deque(maxlen=RECENT_FRAMES)
         self.steps = 0
         self.seconds = 0.0
 
@@ -516,11 +514,10 @@ class Speeds:
         if steps > 0 and seconds > 0:
             rate = self.n * steps / seconds
             self.rates.append(rate)
-            self.last.append(rate)
 
     def recent(self):
         """The median speed of the last RECENT_FRAMES frames that took steps (0 before any)."""
-        return statistics.median(self.last) if self.last else 0.0
+        return statistics.median(self.rates[-RECENT_FRAMES:]) if self.rates else 0.0
 
     def summary(self):
         """(speed, what it covers): with MEDIAN_FRAMES frames that took steps, or more, the

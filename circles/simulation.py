@@ -747,9 +747,9 @@ class Simulation:
         self._log_t = ti.ndarray(ti.f64, shape=cap)
         self._log_i = ti.ndarray(ti.i32, shape=cap)
         self._log_j = ti.ndarray(ti.i32, shape=cap)
+        self._setup_two_level()
         if scheme == "event":
             self._alloc_event_arrays()
-            self._setup_two_level()
             self._setup_parts()
         self._steps_at_once = 1
         if scheme == "discrete":
@@ -773,7 +773,6 @@ class Simulation:
             self._walled = ti.ndarray(ti.i32, shape=n)
             for arr in (self._picked, self._marked):
                 reductions.fill_i32(arr, 0)
-            self._setup_two_level()
             # As the kernels see them: radii and inverse masses rounded to the precision.
             radii = self._radius.astype(self._np_real)
             inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
