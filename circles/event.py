@@ -513,7 +513,7 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
              ev_t: ti.template(), ev_p: ti.template(), dirty: ti.template(), moved: ti.template(),
              cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w,
              box_h, t_end, scalars: ti.template(), real: ti.template(), periodic: ti.template(),
-             earliest: ti.template()):
+             earliest: ti.template(), clear_moved: ti.template()):
     """Each dirty circle finds its earliest event; with `earliest`, scalars[0] = the earliest
     event of all.
 
@@ -538,8 +538,9 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
                                                   0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
             ev_t[i] = t_i
             ev_p[i] = p_i
-    for i in range(n):
-        moved[i] = 0
+    if ti.static(clear_moved):
+        for i in range(n):
+            moved[i] = 0
     if ti.static(earliest):
         for i in range(n):
             if ev_t[i] < scalars[0]:
@@ -684,7 +685,7 @@ def begin_round(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, e
     microseconds each). Returns the earliest event time when the bounds have settled (no event
     in the step when it exceeds t_end), or -1 when more sweeps are needed."""
     _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, moved, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-             segs, box_w, box_h, t_end, scalars, real, periodic, True)
+             segs, box_w, box_h, t_end, scalars, real, periodic, True, True)
     _seed_bounds(ev_t, d, d_key, active_a, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, t_end, real,
                  periodic)
     changed = _sweeps(pos, vel, radius, tau, ev_t, ev_p, ids, d, d_key, active_a, active_b, cell_of, cell_start,
@@ -1440,7 +1441,7 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
 
 @launch.kernel
 def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, reach: ndarr,
-                info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
+                touched: ndarr, dirty: ndarr, info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
                 rows: ti.i32, segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64, box_h: ti.f64, t: ti.f64,
                 window: ti.f64, vlim: ti.f64, allowance: ti.f64, periodic: ti.template()) -> ti.i32:
     """Split the circles into `parts` parts (see above): strips of `rows_per` rows of cells (the
@@ -1454,11 +1455,14 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
     the threads take the borders in turn). Fills `info` (`part_info_size`). Returns 0 when a
     border's clusters outgrow its share, or a cluster crosses two borders (linked circles that
     span the box, as in a dense packing): then the caller runs shorter windows, or one queue.
-    (rows, segs): see `geometry.spans`."""
+    (rows, segs): see `geometry.spans`. Clears every circle's flags `touched` and `dirty` for the
+    window's searches (`queue_parts`; in its pass over every circle, not a pass of its own)."""
     n = pos.shape[0]
     for i in range(n):
         label[i] = _strip_of(cell_of[i], ncx, rows_per, parts, periodic)
         reach[i] = -1.0
+        touched[i] = 0
+        dirty[i] = 0
     taken = 3 * parts + 1
     ok = 3 * parts + 2
     borders = parts - 1
@@ -1556,12 +1560,13 @@ def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_
               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
               real: ti.template(), periodic: ti.template()):
     """The events up to t_end of the circles flagged dirty (a touched circle, or one whose
-    partner is, searches all its neighbours; see `_predict`), with one grid level; the flags
-    cleared. Before a later window of a step in parts: the circles whose searches met a
-    neighbour in another part (`_earliest`, `_pair_in_part`); before a window runs again up to
-    a collision that would outrun the grid: every circle."""
+    partner is, searches all its neighbours; see `_predict`), with one grid level, before a
+    later window of a step in parts: the circles whose searches met a neighbour in another part
+    (`_earliest`, `_pair_in_part`). The dirty flags are cleared as they are read; the touched
+    ones are left for the next split to clear (`split_parts`), which comes before any other
+    reader."""
     _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-             segs, box_w, box_h, t_end, scalars, real, periodic, False)
+             segs, box_w, box_h, t_end, scalars, real, periodic, False, False)
 
 
 @launch.kernel

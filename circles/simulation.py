@@ -1326,8 +1326,6 @@ class Simulation:
         log_count = int(self._counters.to_numpy()[1]) if record else 0
         end = h  # the step's end: h, or the time of a collision that would outrun the grid
         while True:
-            reductions.fill_i32(self._touched, 0)
-            reductions.fill_i32(self._dirty_w, 0)
             t0 = 0.0
             done = 0  # windows of the step done, in the finest cut so far
             cut = end
@@ -1340,7 +1338,7 @@ class Simulation:
                     t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
                     # The circles' reaches are kept in _d1, the queues' scratch of heap times.
                     if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
-                                         self._d1, self._part_info, *cell_args, rows_per, parts, w, hgt, t0,
+                                         self._d1, self._touched, self._dirty_w, self._part_info, *cell_args, rows_per, parts, w, hgt, t0,
                                          min(t1, end) - t0, vlim, self._link_allowance, periodic):
                         break
                     if self._windows >= MOST_WINDOWS:

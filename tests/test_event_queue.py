@@ -313,8 +313,9 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     2 vlim times the window, the bound for any two circles. The parts' lists (a strip's
     circles labelled with it, then the circles claimed for it, labelled -1 - k) hold every
     circle once, in parts of the sizes the split reports. And the window itself, run from
-    one queue for all circles, has no collision between two parts."""
-    from circles import event
+    one queue for all circles, has no collision between two parts. The split also clears every
+    circle's flags of the window's searches (touched, dirty)."""
+    from circles import event, reductions
     from circles.geometry import spans
     from circles.simulation import SPEED_MARGIN
 
@@ -334,9 +335,12 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     parts, rows_per = sim._part_shape()
     assert sim._parts and parts >= 8
     rows, segs = spans(g.ncx, g.ncy, periodic)
+    reductions.fill_i32(sim._touched, 1)
+    reductions.fill_i32(sim._dirty_w, 1)
     assert event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, sim._claimed, sim._d1,
-                             sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs,
+                             sim._touched, sim._dirty_w, sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs,
                              rows_per, parts, *box, 0.0, window, vlim, sim._link_allowance, periodic)
+    assert not sim._touched.to_numpy().any() and not sim._dirty_w.to_numpy().any()
     label = sim._label.to_numpy()
     part = label ^ (label >> 31)
     pos, vel, r = sim.pos.to_numpy(), sim.vel.to_numpy(), sim.radius.to_numpy()  # every clock is at 0
@@ -668,8 +672,8 @@ def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_c
     rows, segs = spans(g.ncx, g.ncy, False)
 
     def split(claimed):
-        ok = event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, claimed, sim._d1, sim._part_info,
-                               g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
+        ok = event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, claimed, sim._d1, sim._touched,
+                               sim._dirty_w, sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
                                *box, 0.0, window, vlim, sim._link_allowance, False)
         info = sim._part_info.to_numpy()
         lo, hi = info[parts + 1:parts + 1 + borders], info[2 * parts + 1:2 * parts + 1 + borders]
