@@ -1053,19 +1053,24 @@ def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: 
 def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.template(), state: ti.template(),
            sums: ti.template(), grid: ti.template(), log: ti.template(), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my,
            r_cut, margin, t_offset, box, vlim2, real: ti.template(), periodic: ti.template(), record: ti.template(),
-           two_level: ti.template(), part: ti.template()):
+           two_level: ti.template(), part: ti.template(), undo: ti.template()):
     """Execute a filled queue's events in key order up to `horizon` (see above), each followed
     by the searches it calls for; returns (reached, horizon): as `queue_step` returns, and the
     step's end, moved to the time of a collision that would outrun the grid. state: (pos, vel,
     radius, inv_mass, tau, ids, ev_t, ev_p, stamp); sums: (pair_count, virial, wall_count,
     wall_impulse); grid: (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids); log:
-    (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`.
-    Events after `until` (at most the horizon) are left in the queue."""
+    (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`;
+    undo: () or (undo_i, undo_c, undo_s, undo_at, chunk), the log in which each event first
+    writes the sums it is about to change (`_log_undo`); when the log is full the queue stops
+    before the event, and returns reached = -3. Events after `until` (at most the horizon) are
+    left in the queue."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
     cur = -1  # the last bucket poured into the heap
     executed = 0
+    u_at = 0  # the undo log's next entry and the end of the chunk it is in
+    u_end = 0
     while True:
         while size == 0 and cur < nb - 1:
             cur += 1
@@ -1087,6 +1092,15 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             break  # the queue holds events up to the end the step had before it was cut
         p = ev_p[c]
         changed = 1
+        if ti.static(len(undo) > 0):
+            if u_at == u_end:
+                u_at = ti.atomic_add(undo[3][0], undo[4])
+                u_end = u_at + undo[4]
+                if u_end > undo[0].shape[0]:
+                    reached = -3.0
+                    break
+            _log_undo(u_at, c, p, ids, sums, undo)
+            u_at += 1
         if p >= 0:
             if ev_p[p] != c or ev_t[p] != e:
                 reached = -1.0
@@ -1143,7 +1157,49 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             subjects += more
             size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
             m += 1
+    if ti.static(len(undo) > 0):
+        for x in range(u_at, ti.min(u_end, undo[0].shape[0])):
+            undo[0][x] = -1 - n  # the chunk's entries left empty
     return reached, horizon
+
+
+@ti.func
+def _log_undo(x, c, p, ids: ti.template(), sums: ti.template(), undo: ti.template()):
+    """Entry x of the undo log (see `_drain`): the count and sum that the event of circle c with
+    p (a circle, or a wall: p < 0) may change, as they are before it: for a pair, those of the
+    circle of lower creation id (`_pair_event`), entry circle index; for a wall, c's, entry
+    -1 - c. `undo_sums` puts them back."""
+    if p >= 0:
+        o = c if ids[c] < ids[p] else p
+        undo[0][x] = o
+        undo[1][x] = sums[0][o]
+        undo[2][x] = sums[1][o]
+    else:
+        undo[0][x] = -1 - c
+        undo[1][x] = sums[2][c]
+        undo[2][x] = sums[3][c]
+
+
+@launch.kernel
+def undo_sums(undo_i: ndarr, undo_c: ndarr, undo_s: ndarr, undo_at: ndarr, pair_count: ndarr, virial: ndarr,
+              wall_count: ndarr, wall_impulse: ndarr):
+    """The circles' counts and sums as they were before the first event in the undo log
+    (`queue_parts`): its entries put back from the last to the first, on one thread. (Each entry
+    holds a circle's values before one event; a circle's entries lie in the order of its events,
+    since the parts of a window take chunks of the log in turn and the windows run in turn.)"""
+    n = pair_count.shape[0]
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        x = ti.min(undo_at[0], undo_i.shape[0]) - 1
+        while x >= 0:
+            k = undo_i[x]
+            if k >= 0:
+                pair_count[k] = undo_c[x]
+                virial[k] = undo_s[x]
+            elif k >= -n:
+                wall_count[-1 - k] = undo_c[x]
+                wall_impulse[-1 - k] = undo_s[x]
+            x -= 1
 
 
 @ti.func
@@ -1235,7 +1291,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                   (pair_count, virial, wall_count, wall_impulse),
                                   (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
-                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, ())
+                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, (), ())
     # A top-level loop (one inside a branch would run on one thread); the largest speed of the
     # state it leaves in speed_out, and on one thread no event held (`_finish`), for the next step.
     _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True,
@@ -1278,12 +1334,16 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # `_pair_in_part`), and before the next window the flagged circles search again over all
 # their neighbours (`repredict`). A collision that would outrun the grid ends the step at its
 # time for every circle, but the other parts may have gone past it: every circle is put back
-# to the step's start (each part copies its circles' state as its first window begins, while
-# they are in the cache for their first predictions) and the step runs again up to that time.
-# Such steps are rare once the speeds have spread from their start (the speed limit has a
-# margin, simulation.SPEED_MARGIN). The step's copy, one pass over the state while it is in
-# the cache, measured as fast as copying each circle at its first change in every window
-# (bench/PERFORMANCE.md), and needs no flag of which circles were copied nor their clocks.
+# to the step's start and the step runs again up to that time. Each part copies its circles'
+# positions and velocities as its first window begins, while they are in the cache for their
+# first predictions; the counts and sums (pair_count, virial, wall_count, wall_impulse), which
+# only an event's one or two circles change, are not copied: each event first writes the
+# values it is about to change to an undo log, in chunks each part takes in turn, and
+# `undo_sums` puts them back from the last entry to the first. Such steps are rare once the
+# speeds have spread from their start (the speed limit has a margin,
+# simulation.SPEED_MARGIN). A whole copy of the sums too, one pass over 24 more bytes a
+# circle, cost about 5% of a step at 1e6; a copy of each circle at its first change in the
+# step, about 8% (bench/PERFORMANCE.md).
 
 #: Circles per part (`split_parts`): enough for the borders' clusters to be a small share, few
 #: enough that a part's arrays mostly stay in the cache.
@@ -1574,7 +1634,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
                 prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
                 wall_impulse: ndarr, touched: ndarr, dirty: ndarr, b_pos: ndarr, b_vel: ndarr,
-                b_pair_count: ndarr, b_virial: ndarr, b_wall_count: ndarr, b_wall_impulse: ndarr,
+                undo_i: ndarr, undo_c: ndarr, undo_s: ndarr, undo_at: ndarr, undo_chunk: ti.i32,
                 label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, speed_out: ndarr, cell_of: ndarr,
                 cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
@@ -1587,9 +1647,13 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     (each pair once, as `_first_events_once`; a pair across two parts flags both circles
     touched, for the next window to search in full): each part's queue filled and run
     (`_drain`) by one thread, the threads taking parts in turn. With `first`, each part also
-    copies its circles' state at the step's start (every clock 0) into the backup (b_pos to
-    b_wall_impulse) before its events run, as it reads them for their walls: a collision that
-    would outrun the grid, in any window, redoes the step from it (`Simulation._queue_parts_step`).
+    copies its circles' positions and velocities at the step's start (every clock 0) into the
+    backup (b_pos, b_vel) before its events run, as it reads them for their walls, and the
+    step's undo log starts empty; every event in any window first writes the count and sum it
+    changes to the log (undo_i, undo_c, undo_s from undo_at[0] on, `undo_chunk` entries taken
+    at a time; see above). A collision that would outrun the grid, in any window, redoes the
+    step from the backup and the log (`Simulation._queue_parts_step`); a part that finds the
+    log full stops before the event with result -3 (`Simulation._undo_log_full`).
     Circles stay at their clocks (but see the last window, below). result[k]: what
     `queue_step` returns, for part k. In the step's last window (`until` = `t_end`) a part that
     reached the end (no collision that would outrun the grid) also moves its circles there and
@@ -1603,6 +1667,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     n = pos.shape[0]
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     info[3 * parts + 1] = 0  # parts taken
+    if first != 0:
+        undo_at[0] = 0  # the step's undo log starts empty
     speed_out[0] = 0.0
     speed_out[1] = 0.0
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
@@ -1629,8 +1695,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
-                            copy_state(i, (pos, vel, pair_count, virial, wall_count, wall_impulse),
-                                       (b_pos, b_vel, b_pair_count, b_virial, b_wall_count, b_wall_impulse))
+                            copy_state(i, (pos, vel), (b_pos, b_vel))
                             _first_wall_event(i, pos, vel, radius, STEP_START, ids, ev_t, ev_p, box, horizon, real,
                                               periodic)
                     for q in range(s_lo, items):
@@ -1656,7 +1721,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
-                                         (label, touched, dirty))
+                                         (label, touched, dirty), (undo_i, undo_c, undo_s, undo_at, undo_chunk))
                 result[k] = reached
                 if until >= t_end and reached >= t_end:
                     for q in range(s_lo, items):
