@@ -31,10 +31,10 @@ def _passing_run():
                  dict(n=1_000_000, area_fraction=0.5, place_s_median=2.9, place_s_min=2.8, place_s_max=3.2),
                  dict(n=1_000_000, area_fraction=0.8, place_s_median=19.0, place_s_min=19.0, place_s_max=19.0)]
     render = [dict(n=1_000_000, frame_s_median=0.09, frame_s_min=0.08, frame_s_max=0.2)]
-    memory = [dict(n=1_000_000, scheme="event", precision="f32", bytes_per_circle=0, array_bytes_per_circle=182),
+    memory = [dict(n=1_000_000, scheme="event", precision="f32", bytes_per_circle=0, array_bytes_per_circle=174),
               dict(n=10_000_000, scheme="discrete", precision="f32", bytes_per_circle=111,
                    array_bytes_per_circle=132),
-              dict(n=10_000_000, scheme="event", precision="f32", bytes_per_circle=199, array_bytes_per_circle=182)]
+              dict(n=10_000_000, scheme="event", precision="f32", bytes_per_circle=199, array_bytes_per_circle=174)]
     spread = [dict(n=10_000, scheme="discrete", cost_ratio=1.2), dict(n=10_000, scheme="event", cost_ratio=2.9)]
     peers = [dict(peer="pymunk", n=100_000, circle_steps_per_s_median=1e6),
              dict(peer="ratio", n=100_000, scheme="discrete", precision="f32", circle_steps_ratio=31.0,
@@ -115,7 +115,7 @@ def test_kept_runs_read_back_from_their_csvs():
     intel, arch = targets.read_run(ROOT / "outputs" / "bench" / "intel-xeon-processor")
     rows = targets.evaluate(intel, arch)
     assert [met for _, _, met in rows] == ["yes", "no", "yes", "yes", "yes", "yes", "yes", "yes"]
-    assert rows[0][1] == "46.3 M [45.2 M, 46.9 M]"
-    assert rows[1][1] == "12 M [11.8 M, 12.3 M] and 1.17 M collisions/s"
-    assert rows[2][1].startswith("discrete 45.4 times [44.2, 47.2]")
-    assert rows[3][1] == "discrete 1.46 (1e4 against 1e5); event 1.35 (1e5 against 1e4)"
+    assert rows[0][1] == "42.6 M [41.9 M, 43.2 M]"
+    assert rows[1][1] == "12.4 M [11.9 M, 12.6 M] and 1.2 M collisions/s"
+    assert rows[2][1].startswith("discrete 51.3 times [45.1, 52.6]")
+    assert rows[3][1] == "discrete 1.19 (1e5 against 1e6); event 1.33 (1e5 against 1e4)"
