@@ -1501,9 +1501,10 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
 
 @launch.kernel
 def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, reach: ndarr,
-                touched: ndarr, dirty: ndarr, info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32,
-                rows: ti.i32, segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64, box_h: ti.f64, t: ti.f64,
-                window: ti.f64, vlim: ti.f64, allowance: ti.f64, periodic: ti.template()) -> ti.i32:
+                touched: ndarr, dirty: ndarr, info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
+                ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64,
+                box_h: ti.f64, t: ti.f64, window: ti.f64, vlim: ti.f64, allowance: ti.f64,
+                periodic: ti.template()) -> ti.i32:
     """Split the circles into `parts` parts (see above): strips of `rows_per` rows of cells (the
     last takes the rest), circle i of strip k labelled k, except the clusters of linked
     circles (see above: at time t, for the window of length `window` that the parts run, the

@@ -1331,7 +1331,8 @@ class Simulation:
         the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as many
         are tried. A collision that would outrun the grid ends the step at its time for
         every circle, but the other parts may have gone past it: the step runs again from its
-        start (`_backup`, which each part fills in the first window) up to that time. The
+        start (`_backup`, which each part fills in the first window, and the undo log of the
+        counts and sums, `_restore_parts`) up to that time. The
         events up to it are the same (by causality), and so are their times (a pair's time of
         impact is computed from the later of its two clocks, which only their own events move),
         so the state is that of one queue bit for bit."""
@@ -1361,8 +1362,9 @@ class Simulation:
                     t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
                     # The circles' reaches are kept in _d1, the queues' scratch of heap times.
                     if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
-                                         self._d1, self._touched, self._dirty_w, self._part_info, *cell_args, rows_per, parts, w, hgt, t0,
-                                         min(t1, end) - t0, vlim, self._link_allowance, periodic):
+                                         self._d1, self._touched, self._dirty_w, self._part_info, *cell_args,
+                                         rows_per, parts, w, hgt, t0, min(t1, end) - t0, vlim,
+                                         self._link_allowance, periodic):
                         break
                     if self._windows >= MOST_WINDOWS:
                         self._split_wait = SPLIT_RETRY_STEPS
