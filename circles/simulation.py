@@ -1464,13 +1464,12 @@ class Simulation:
         self._set_scalars(NEVER, NEVER)
         return cut
 
-    def _restore(self, log_count, clocks=True):
-        """The state of the `_backup`, with `log_count` events logged; with `clocks`, every clock
-        at 0 (a backup of the step's start; else the clocks are the backup's)."""
+    def _restore(self, log_count):
+        """The state of the `_backup`, taken at the step's start, with every clock at 0 and
+        `log_count` events logged."""
         for name, arr in self._backup.items():
             reductions.copy_vec(arr, getattr(self, name))
-        if clocks:
-            reductions.fill_real(self.tau, 0.0)
+        reductions.fill_real(self.tau, 0.0)
         if self._record_cap > 0:
             self._set_counter(1, log_count)
 
