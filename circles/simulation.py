@@ -1369,11 +1369,7 @@ class Simulation:
                     if self._windows >= MOST_WINDOWS:
                         self._split_wait = SPLIT_RETRY_STEPS
                         # The rest of the step from one queue, from the circles' clocks as they are.
-                        cuts = self.cut_steps
-                        reached = self._queue_step_whole(end, vlim, done == 0)
-                        if end < h:
-                            self.cut_steps = cuts  # counted when the parts first met the cut
-                        return reached
+                        return self._rest_from_one_queue(end, h, vlim, done == 0)
                     self._windows *= 2
                     done *= 2
                 event.queue_parts(self.pos, self.vel, self.radius, self.inv_mass, self.tau, self.ids, self._ev_t,
@@ -1436,8 +1432,14 @@ class Simulation:
         # 16 bytes an entry; grown only with twice the new log's bytes to spare.
         if grown > size and (available is None or available > 2 * 16 * grown):
             self._make_undo_log(grown)
+        return self._rest_from_one_queue(end, h, vlim, True)
+
+    def _rest_from_one_queue(self, end, h, vlim, at_start):
+        """A step in parts over [0, h], cut to `end` so far, run on to `end` from one queue
+        (`_queue_step_whole`; `at_start`: from the step's start). Returns as `_queue_parts_step`;
+        a cut the parts met is counted once."""
         cuts = self.cut_steps
-        reached = self._queue_step_whole(end, vlim)
+        reached = self._queue_step_whole(end, vlim, at_start)
         if end < h:
             self.cut_steps = cuts  # counted when the parts first met the cut
         return reached
