@@ -731,9 +731,10 @@ def copy_state(i, arrays: ti.template(), copies: ti.template()):
 
 @ti.func
 def _wall_event(i, e, p, pos: ti.template(), vel: ti.template(), radius: ti.template(), inv_mass: ti.template(),
-                tau: ti.template(), wall_count: ti.template(), wall_impulse: ti.template(), box):
+                tau: ti.template(), sums: ti.template(), box):
     """Circle i meets wall -1 - p at time e: placed exactly in contact (no round-off escape
-    through the wall), its normal velocity reversed, its wall sums updated."""
+    through the wall), its normal velocity reversed, its wall sums updated (sums: (wall_count,
+    wall_impulse, entry), see `_add_sums`)."""
     w = -1 - p
     axis = w // 2
     x = pos[i] + vel[i] * (e - tau[i])
@@ -748,16 +749,31 @@ def _wall_event(i, e, p, pos: ti.template(), vel: ti.template(), radius: ti.temp
     pos[i] = x
     vel[i] = v
     tau[i] = e
-    wall_count[i] = wall_count[i] + 1
-    wall_impulse[i] = wall_impulse[i] + 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64)
+    _add_sums(i, -1 - i, 2.0 * ti.abs(ti.cast(vn, ti.f64)) / ti.cast(inv_mass[i], ti.f64), sums)
+
+
+@ti.func
+def _add_sums(i, code, amount, sums: ti.template()):
+    """One more event for circle i's count, and `amount` (float64) more for its sum. sums:
+    (count, sum, entry): with entry (sum_i, sum_s, x), the parts' sum log (`queue_parts`), its
+    entry x takes `code` (i for a pair's sums, -1 - i for a wall's) and the amount, added when
+    the step is done (`apply_sums`); with any shorter entry, the arrays count and sum now."""
+    entry = ti.static(sums[2])
+    if ti.static(len(entry) == 3):
+        entry[0][entry[2]] = code
+        entry[1][entry[2]] = amount
+    else:
+        sums[0][i] = sums[0][i] + 1
+        sums[1][i] = sums[1][i] + amount
 
 
 @ti.func
 def _pair_event(i, j, e, horizon, vlim2, pos: ti.template(), vel: ti.template(), radius: ti.template(),
-                inv_mass: ti.template(), tau: ti.template(), ids: ti.template(), pair_count: ti.template(),
-                virial: ti.template(), box, periodic: ti.template()):
+                inv_mass: ti.template(), tau: ti.template(), ids: ti.template(), sums: ti.template(), box,
+                periodic: ti.template()):
     """Circles i and j collide at time e: both brought to e, the impulse applied when they
-    approach, the pair's sums (to the circle of lower creation id) updated. Returns 1 when the
+    approach, the pair's sums (to the circle of lower creation id; sums: (pair_count, virial,
+    entry), see `_add_sums`) updated. Returns 1 when the
     impulse was applied, 2 when they touch without approaching (brought to e only), and 0 with
     nothing changed when the impulse would make one faster than the grid allows (vlim2 its
     square) before the horizon: the step must end there (see the module docstring)."""
@@ -795,9 +811,8 @@ def _pair_event(i, j, e, horizon, vlim2, pos: ti.template(), vel: ti.template(),
             vj = vj_new
             # Plain updates, not atomics: a circle is in at most one executed pair at a time.
             owner = i if ids[i] < ids[j] else j
-            pair_count[owner] = pair_count[owner] + 1
             # (r_i + r_j) |J| with |d| = r_i + r_j at contact: |J / |d|| d.d.
-            virial[owner] = virial[owner] + ti.abs(ti.cast(jmp, ti.f64)) * ti.cast(dd, ti.f64)
+            _add_sums(owner, owner, ti.abs(ti.cast(jmp, ti.f64)) * ti.cast(dd, ti.f64), sums)
     if status != 0:
         pos[i] = xi
         pos[j] = xj
@@ -839,7 +854,7 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
         if e <= horizon and not key_less(bound_t[i], bound_key[i, 0], bound_key[i, 1], e, lo, hi):
             if p < 0 and p != NO_EVENT:
                 if ti.static(not periodic):
-                    _wall_event(i, e, p, pos, vel, radius, inv_mass, tau, wall_count, wall_impulse, box)
+                    _wall_event(i, e, p, pos, vel, radius, inv_mass, tau, (wall_count, wall_impulse, ()), box)
                     moved[i] = 1
                     mark_neighbours_dirty(i, dirty, cell_of, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic)
                     if counters[0] == 0:
@@ -849,8 +864,8 @@ def execute(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndarr, 
             elif p > i and ev_p[p] == i and ev_t[p] == e and not key_less(bound_t[p], bound_key[p, 0],
                                                                           bound_key[p, 1], e, lo, hi):
                 j = p
-                status = _pair_event(i, j, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, pair_count,
-                                     virial, box, periodic)
+                status = _pair_event(i, j, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids,
+                                     (pair_count, virial, ()), box, periodic)
                 if status == 0:
                     ti.atomic_min(scalars[1], e)  # the step is cut here
                 else:
@@ -1053,24 +1068,25 @@ def _queue_fix(x, size, scale, nb, q: ti.template(), ev_t: ti.template(), ev_p: 
 def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.template(), state: ti.template(),
            sums: ti.template(), grid: ti.template(), log: ti.template(), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my,
            r_cut, margin, t_offset, box, vlim2, real: ti.template(), periodic: ti.template(), record: ti.template(),
-           two_level: ti.template(), part: ti.template(), undo: ti.template()):
+           two_level: ti.template(), part: ti.template(), log_sums: ti.template()):
     """Execute a filled queue's events in key order up to `horizon` (see above), each followed
     by the searches it calls for; returns (reached, horizon): as `queue_step` returns, and the
     step's end, moved to the time of a collision that would outrun the grid. state: (pos, vel,
     radius, inv_mass, tau, ids, ev_t, ev_p, stamp); sums: (pair_count, virial, wall_count,
     wall_impulse); grid: (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids); log:
     (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`;
-    undo: () or (undo_i, undo_c, undo_s, undo_at, chunk), the log in which each event first
-    writes the sums it is about to change (`_log_undo`); when the log is full the queue stops
-    before the event, and returns reached = -3. Events after `until` (at most the horizon) are
+    log_sums: () or (sum_i, sum_s, sum_at, chunk), the log to which each event writes what it
+    adds to the counts and sums instead (`_add_sums`, one entry an event, taken before it); when
+    the log is full the queue stops before the event, and returns reached = -3. Events after `until` (at most the horizon) are
     left in the queue."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
     cur = -1  # the last bucket poured into the heap
     executed = 0
-    u_at = 0  # the undo log's next entry and the end of the chunk it is in
+    u_at = 0  # the sum log's next entry and the end of the chunk it is in
     u_end = 0
+    x_sum = 0  # the event's entry
     while True:
         while size == 0 and cur < nb - 1:
             cur += 1
@@ -1092,28 +1108,31 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             break  # the queue holds events up to the end the step had before it was cut
         p = ev_p[c]
         changed = 1
-        if ti.static(len(undo) > 0):
+        if ti.static(len(log_sums) > 0):
             if u_at == u_end:
-                u_at = ti.atomic_add(undo[3][0], undo[4])
-                u_end = u_at + undo[4]
-                if u_end > undo[0].shape[0]:
+                u_at = ti.atomic_add(log_sums[2][0], log_sums[3])
+                u_end = u_at + log_sums[3]
+                if u_end > log_sums[0].shape[0]:
                     reached = -3.0
                     break
-            _log_undo(u_at, c, p, ids, sums, undo)
+            x_sum = u_at
             u_at += 1
+            log_sums[0][x_sum] = -1 - n  # no sums, unless the event writes them
+        # Where the event adds to its sums: the arrays, or the log's entry u_at.
+        entry = ti.static(log_sums[0:2] + (x_sum,))  # (sum_i, sum_s, x), or just x: no log
         if p >= 0:
             if ev_p[p] != c or ev_t[p] != e:
                 reached = -1.0
                 break
-            status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, sums[0], sums[1],
-                                 box, periodic)
+            status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids,
+                                 (sums[0], sums[1], entry), box, periodic)
             if status == 0:
                 # It would outrun the grid: the step ends at e, which it executes (e is not
                 # before the new end). Later predictions look no further than e.
                 horizon = e
                 reached = ti.cast(e, ti.f64)
-                status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids, sums[0],
-                                     sums[1], box, periodic)
+                status = _pair_event(c, p, e, horizon, vlim2, pos, vel, radius, inv_mass, tau, ids,
+                                     (sums[0], sums[1], entry), box, periodic)
             if ti.static(record):
                 if status == 1:
                     _log(e, ti.min(ids[c], ids[p]), ti.max(ids[c], ids[p]), t_offset, log[0], log[1], log[2],
@@ -1121,7 +1140,7 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             changed = 2
         else:
             if ti.static(not periodic):
-                _wall_event(c, e, p, pos, vel, radius, inv_mass, tau, sums[2], sums[3], box)
+                _wall_event(c, e, p, pos, vel, radius, inv_mass, tau, (sums[2], sums[3], entry), box)
                 if ti.static(record):
                     _log(e, ids[c], p, t_offset, log[0], log[1], log[2], log[3])
         executed += 1
@@ -1157,49 +1176,39 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             subjects += more
             size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
             m += 1
-    if ti.static(len(undo) > 0):
-        for x in range(u_at, ti.min(u_end, undo[0].shape[0])):
-            undo[0][x] = -1 - n  # the chunk's entries left empty
+    if ti.static(len(log_sums) > 0):
+        for x in range(u_at, ti.min(u_end, log_sums[0].shape[0])):
+            log_sums[0][x] = -1 - n  # the chunk's entries left empty
     return reached, horizon
 
 
-@ti.func
-def _log_undo(x, c, p, ids: ti.template(), sums: ti.template(), undo: ti.template()):
-    """Entry x of the undo log (see `_drain`): the count and sum that the event of circle c with
-    p (a circle, or a wall: p < 0) may change, as they are before it: for a pair, those of the
-    circle of lower creation id (`_pair_event`), entry circle index; for a wall, c's, entry
-    -1 - c. `undo_sums` puts them back."""
-    if p >= 0:
-        o = c if ids[c] < ids[p] else p
-        undo[0][x] = o
-        undo[1][x] = sums[0][o]
-        undo[2][x] = sums[1][o]
-    else:
-        undo[0][x] = -1 - c
-        undo[1][x] = sums[2][c]
-        undo[2][x] = sums[3][c]
-
-
 @launch.kernel
-def undo_sums(undo_i: ndarr, undo_c: ndarr, undo_s: ndarr, undo_at: ndarr, pair_count: ndarr, virial: ndarr,
-              wall_count: ndarr, wall_impulse: ndarr):
-    """The circles' counts and sums as they were before the first event in the undo log
-    (`queue_parts`): its entries put back from the last to the first, on one thread. (Each entry
-    holds a circle's values before one event; a circle's entries lie in the order of its events,
-    since the parts of a window take chunks of the log in turn and the windows run in turn.)"""
+def apply_sums(sum_i: ndarr, sum_s: ndarr, sum_at: ndarr, pair_count: ndarr, virial: ndarr, wall_count: ndarr,
+               wall_impulse: ndarr):
+    """What the events of a step in parts wrote to the sum log (`queue_parts`) added to the
+    circles' counts and sums: an entry k >= 0 adds one pair to circle k's count and its amount
+    to its virial, an entry -1 - k (k < n) one wall hit and its impulse to circle k's; an entry
+    below -n is empty. Each thread takes a range of the circles and reads the whole log in
+    order: a circle's entries lie in the order of its events (the parts of a window take chunks
+    of the log in turn, and the windows run in turn), so its sums are the same numbers, bit for
+    bit, as when each event added to them."""
     n = pair_count.shape[0]
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        x = ti.min(undo_at[0], undo_i.shape[0]) - 1
-        while x >= 0:
-            k = undo_i[x]
-            if k >= 0:
-                pair_count[k] = undo_c[x]
-                virial[k] = undo_s[x]
-            elif k >= -n:
-                wall_count[-1 - k] = undo_c[x]
-                wall_impulse[-1 - k] = undo_s[x]
-            x -= 1
+    threads = ti.static(max(count_parts(), 1))
+    for it in range(threads * PART_ITERATIONS):
+        if it % PART_ITERATIONS == 0:
+            k = it // PART_ITERATIONS
+            lo = ti.cast(ti.cast(n, ti.i64) * k // threads, ti.i32)
+            hi = ti.cast(ti.cast(n, ti.i64) * (k + 1) // threads, ti.i32)
+            for x in range(ti.min(sum_at[0], sum_i.shape[0])):
+                e = sum_i[x]
+                i = ti.select(e >= 0, e, -1 - e)
+                if lo <= i and i < hi:
+                    if e >= 0:
+                        pair_count[i] = pair_count[i] + 1
+                        virial[i] = virial[i] + sum_s[x]
+                    else:
+                        wall_count[i] = wall_count[i] + 1
+                        wall_impulse[i] = wall_impulse[i] + sum_s[x]
 
 
 @ti.func
@@ -1336,14 +1345,16 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
 # time for every circle, but the other parts may have gone past it: every circle is put back
 # to the step's start and the step runs again up to that time. Each part copies its circles'
 # positions and velocities as its first window begins, while they are in the cache for their
-# first predictions; the counts and sums (pair_count, virial, wall_count, wall_impulse), which
-# only an event's one or two circles change, are not copied: each event first writes the
-# values it is about to change to an undo log, in chunks each part takes in turn, and
-# `undo_sums` puts them back from the last entry to the first. Such steps are rare once the
-# speeds have spread from their start (the speed limit has a margin,
-# simulation.SPEED_MARGIN). A whole copy of the sums too, one pass over 24 more bytes a
-# circle, cost about 5% of a step at 1e6; a copy of each circle at its first change in the
-# step, about 8% (bench/PERFORMANCE.md).
+# first predictions. Such steps are rare once the speeds have spread from their start (the
+# speed limit has a margin, simulation.SPEED_MARGIN). The counts and sums (pair_count, virial,
+# wall_count, wall_impulse), which only an event's one or two circles change, are not changed
+# in the step at all: each event writes what it adds to them to a sum log, in chunks each part
+# takes in turn, and `apply_sums` adds the log once the step is done, so a redone step only
+# drops it. An event then touches no line of the sums, which no search reads: their first load
+# in an event was its costliest miss (about 9% of the samples of a step at 1e6, `perf`). A
+# whole copy of the sums at each step's start, one pass over 24 more bytes a circle, cost
+# about 5% of a step at 1e6; a copy of each circle at its first change in the step, about 8%
+# (bench/PERFORMANCE.md).
 
 #: Circles per part (`split_parts`): enough for the borders' clusters to be a small share, few
 #: enough that a part's arrays mostly stay in the cache.
@@ -1635,7 +1646,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 ev_p: ndarr, stamp: ndarr, heap: ndarr, where: ndarr, heap_t: ndarr, head: ndarr, nxt: ndarr,
                 prv: ndarr, pending: ndarr, pair_count: ndarr, wall_count: ndarr, virial: ndarr,
                 wall_impulse: ndarr, touched: ndarr, dirty: ndarr, b_pos: ndarr, b_vel: ndarr,
-                undo_i: ndarr, undo_c: ndarr, undo_s: ndarr, undo_at: ndarr, undo_chunk: ti.i32,
+                sum_i: ndarr, sum_s: ndarr, sum_at: ndarr, sum_chunk: ti.i32,
                 label: ndarr, claimed: ndarr, info: ndarr, result: ndarr, speed_out: ndarr, cell_of: ndarr,
                 cell_start: ndarr,
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
@@ -1650,11 +1661,12 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     (`_drain`) by one thread, the threads taking parts in turn. With `first`, each part also
     copies its circles' positions and velocities at the step's start (every clock 0) into the
     backup (b_pos, b_vel) before its events run, as it reads them for their walls, and the
-    step's undo log starts empty; every event in any window first writes the count and sum it
-    changes to the log (undo_i, undo_c, undo_s from undo_at[0] on, `undo_chunk` entries taken
-    at a time; see above). A collision that would outrun the grid, in any window, redoes the
-    step from the backup and the log (`Simulation._queue_parts_step`); a part that finds the
-    log full stops before the event with result -3 (`Simulation._undo_log_full`).
+    step's sum log starts empty; every event in any window writes what it adds to the counts
+    and sums to the log instead (sum_i, sum_s from sum_at[0] on, `sum_chunk` entries taken at a
+    time; see above), and `apply_sums` adds them once the step is done. A collision that would
+    outrun the grid, in any window, redoes the step from the backup, the log dropped
+    (`Simulation._queue_parts_step`); a part that finds the log full stops before the event
+    with result -3 (`Simulation._sum_log_full`).
     Circles stay at their clocks (but see the last window, below). result[k]: what
     `queue_step` returns, for part k. In the step's last window (`until` = `t_end`) a part that
     reached the end (no collision that would outrun the grid) also moves its circles there and
@@ -1669,7 +1681,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
     info[3 * parts + 1] = 0  # parts taken
     if first != 0:
-        undo_at[0] = 0  # the step's undo log starts empty
+        sum_at[0] = 0  # the step's sum log starts empty
     speed_out[0] = 0.0
     speed_out[1] = 0.0
     for it in range(ti.static(max(count_parts(), 1)) * PART_ITERATIONS):
@@ -1722,7 +1734,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
-                                         (label, touched, dirty), (undo_i, undo_c, undo_s, undo_at, undo_chunk))
+                                         (label, touched, dirty), (sum_i, sum_s, sum_at, sum_chunk))
                 result[k] = reached
                 if until >= t_end and reached >= t_end:
                     for q in range(s_lo, items):

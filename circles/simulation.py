@@ -74,16 +74,16 @@ PART_CLAIMS = 4
 #: largest coordinate further, against the round-off of the positions within a window.
 LINK_ALLOWANCE_ULPS = 16
 #: The arrays of a circle's state that the parts of an event step back up at its start (the
-#: clocks aside, 0 then), in the order event.queue_parts takes them; the counts and sums that
-#: its events change go to an undo log instead (`event.undo_sums`).
+#: clocks aside, 0 then), in the order event.queue_parts takes them; the counts and sums are not
+#: changed until the step is done (its events write to a sum log, `event.apply_sums`).
 PARTS_BACKUP_ORDER = ("pos", "vel")
-#: The parts' undo log of the counts and sums (`event.queue_parts`): entries per circle at first
-#: (an event writes one: the bench scene's steps take about 0.1 a circle, at area fraction 0.6
-#: about 0.5), twice as many each time a step fills it while the memory allows, up to
-#: UNDO_MOST_PER_CIRCLE; and the most entries a part takes from it at a time.
-UNDO_PER_CIRCLE = 1
-UNDO_MOST_PER_CIRCLE = 4
-UNDO_CHUNK = 256
+#: The parts' sum log (`event.queue_parts`): entries per circle at first (an event writes one:
+#: the bench scene's steps take about 0.1 a circle, at area fraction 0.6 about 0.5), twice as
+#: many each time a step fills it while the memory allows, up to SUM_LOG_MOST_PER_CIRCLE; and
+#: the most entries a part takes from it at a time.
+SUM_LOG_PER_CIRCLE = 1
+SUM_LOG_MOST_PER_CIRCLE = 4
+SUM_LOG_CHUNK = 256
 #: Windows of a step split into parts at most (`Simulation._queue_parts_step`), and the steps
 #: after which a step tries half as many.
 MOST_WINDOWS = 8
@@ -335,7 +335,7 @@ def default_dt(scheme, radius, vel):
 #: tests/test_memory.py). An event queue split into parts (`_setup_parts`) holds PART_BYTES a
 #: circle more.
 ARRAY_BYTES = {("event", "f32"): 129, ("event", "f64"): 165, ("discrete", "f32"): 132, ("discrete", "f64"): 156}
-PART_BYTES = {"f32": 45, "f64": 61}
+PART_BYTES = {"f32": 41, "f64": 57}
 
 
 def bytes_per_circle(n, scheme, precision):
@@ -819,25 +819,29 @@ class Simulation:
         # The state at the step's start, put back when a collision would outrun the grid
         # (`_queue_parts_step`; every clock is 0 then), and the flags of its windows.
         self._backup = {name: self._like(getattr(self, name)) for name in PARTS_BACKUP_ORDER}
-        self._undo_at = ti.ndarray(ti.i32, shape=1)
-        self._make_undo_log(max(int(UNDO_PER_CIRCLE * n), 1))
-        self.undo_log_full = 0  # steps whose parts filled the undo log (then run from one queue)
+        self._sum_at = ti.ndarray(ti.i32, shape=1)
+        self._make_sum_log(max(int(SUM_LOG_PER_CIRCLE * n), 1))
+        self.sum_log_full = 0  # steps whose parts filled the sum log (then run from one queue)
         self._touched = ti.ndarray(ti.i32, shape=n)
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
         # The split's absolute allowance on links, against round-off in the window's positions.
         self._link_allowance = LINK_ALLOWANCE_ULPS * float(np.finfo(self._np_real).eps) * max(self.box)
 
-    def _make_undo_log(self, size):
-        """The parts' undo log (`event.queue_parts`) of `size` entries: a circle (or wall) index,
-        a count and a sum each."""
-        self._undo_log = (ti.ndarray(ti.i32, shape=size), ti.ndarray(ti.i32, shape=size),
-                          ti.ndarray(ti.f64, shape=size))
+    def _make_sum_log(self, size):
+        """The parts' sum log (`event.queue_parts`) of `size` entries: a circle's index (or a
+        wall hit's entry) and an amount each."""
+        self._sum_log = (ti.ndarray(ti.i32, shape=size), ti.ndarray(ti.f64, shape=size))
 
-    def _undo_chunk(self, parts):
-        """The entries a part takes from the undo log at a time: UNDO_CHUNK, or fewer for a log
-        too short for every part of several windows to hold a few chunks."""
-        size = self._undo_log[0].shape[0]
-        return max(1, min(UNDO_CHUNK, size // (4 * parts * MOST_WINDOWS)))
+    def _sum_chunk(self, parts):
+        """The entries a part takes from the sum log at a time: SUM_LOG_CHUNK, or fewer for a
+        log too short for every part of several windows to hold a few chunks."""
+        size = self._sum_log[0].shape[0]
+        return max(1, min(SUM_LOG_CHUNK, size // (4 * parts * MOST_WINDOWS)))
+
+    def _apply_sums(self):
+        """The counts and sums of the windows run in parts so far this step, from the sum log."""
+        event.apply_sums(*self._sum_log, self._sum_at, self.pair_count, self.virial, self.wall_count,
+                         self.wall_impulse)
 
     def _part_shape(self):
         """(parts, rows of cells per part) of this step's split (`event.split_parts`); parts < 2: none
@@ -1331,8 +1335,8 @@ class Simulation:
         the rest of the step runs from one queue; every WINDOW_RETRY_STEPS steps, half as many
         are tried. A collision that would outrun the grid ends the step at its time for
         every circle, but the other parts may have gone past it: the step runs again from its
-        start (`_backup`, which each part fills in the first window, and the undo log of the
-        counts and sums, `_restore_parts`) up to that time. The
+        start (`_backup`, which each part fills in the first window; the counts and sums change
+        only when the step is done, from the sum log, `_apply_sums`) up to that time. The
         events up to it are the same (by causality), and so are their times (a pair's time of
         impact is computed from the later of its two clocks, which only their own events move),
         so the state is that of one queue bit for bit."""
@@ -1368,7 +1372,10 @@ class Simulation:
                         break
                     if self._windows >= MOST_WINDOWS:
                         self._split_wait = SPLIT_RETRY_STEPS
-                        # The rest of the step from one queue, from the circles' clocks as they are.
+                        # The rest of the step from one queue, from the circles' clocks as they are,
+                        # and from the sums of the windows done.
+                        if done > 0:
+                            self._apply_sums()
                         return self._rest_from_one_queue(end, h, vlim, done == 0)
                     self._windows *= 2
                     done *= 2
@@ -1376,8 +1383,8 @@ class Simulation:
                                   self._ev_p, self._dirty, *self._active, self._d1, self._head, self._moved,
                                   self._prv, self._pending, self.pair_count, self.wall_count, self.virial,
                                   self.wall_impulse, self._touched, self._dirty_w,
-                                  *(b[name] for name in PARTS_BACKUP_ORDER), *self._undo_log, self._undo_at,
-                                  self._undo_chunk(parts), self._label, self._claimed,
+                                  *(b[name] for name in PARTS_BACKUP_ORDER), *self._sum_log, self._sum_at,
+                                  self._sum_chunk(parts), self._label, self._claimed,
                                   self._part_info, self._part_result, self._speed_out, *cell_args, rows_per,
                                   parts, w, hgt, end,
                                   min(t1, end), vlim, self._time, int(done == 0), self._counters, self._log_t,
@@ -1388,7 +1395,7 @@ class Simulation:
                 if np.any(reached == -2):
                     raise self._jammed()
                 if np.any(reached == -3):
-                    return self._undo_log_full(end, h, vlim, log_count)
+                    return self._sum_log_full(end, h, vlim, log_count)
                 if np.any(reached < 0):
                     raise RuntimeError(f"the earliest event of a part's queue was not its partner's at step time "
                                        f"{h} (internal error)")
@@ -1403,35 +1410,29 @@ class Simulation:
             # from its start up to it (a redo may meet an earlier such collision: one cut step).
             if end == h:
                 self.cut_steps += 1
-            self._restore_parts(log_count)
+            self._restore(log_count)
             end = cut
         h = end
         self.rounds += 1
+        self._apply_sums()
         # The last window's parts moved their circles to the end and measured the largest speed
         # (`event.queue_parts`); reading their results synchronised.
         self._known_speed = reductions.speed_in(self._speed_view)
         return h
 
-    def _restore_parts(self, log_count):
-        """The state at the start of a step in parts: positions and velocities from the backup its
-        first window took, counts and sums from its undo log, every clock 0, `log_count` events
-        logged."""
+    def _sum_log_full(self, end, h, vlim, log_count):
+        """A step in parts whose events filled the sum log: it runs again from its start (the
+        counts and sums unchanged, the log dropped) up to `end` from one queue (which needs no
+        log), and later steps have a log twice as long, up to SUM_LOG_MOST_PER_CIRCLE entries a
+        circle. Returns as `_queue_parts_step`."""
+        self.sum_log_full += 1
         self._restore(log_count)
-        event.undo_sums(*self._undo_log, self._undo_at, self.pair_count, self.virial, self.wall_count,
-                        self.wall_impulse)
-
-    def _undo_log_full(self, end, h, vlim, log_count):
-        """A step in parts whose events filled the undo log: it runs again from its start up to
-        `end` from one queue (which needs no log), and later steps have a log twice as long, up to
-        UNDO_MOST_PER_CIRCLE entries a circle. Returns as `_queue_parts_step`."""
-        self.undo_log_full += 1
-        self._restore_parts(log_count)
-        size, most = self._undo_log[0].shape[0], int(UNDO_MOST_PER_CIRCLE * self.n)
+        size, most = self._sum_log[0].shape[0], int(SUM_LOG_MOST_PER_CIRCLE * self.n)
         grown = min(2 * size, most)
         available = available_memory()
-        # 16 bytes an entry; grown only with twice the new log's bytes to spare.
-        if grown > size and (available is None or available > 2 * 16 * grown):
-            self._make_undo_log(grown)
+        # 12 bytes an entry; grown only with twice the new log's bytes to spare.
+        if grown > size and (available is None or available > 2 * 12 * grown):
+            self._make_sum_log(grown)
         return self._rest_from_one_queue(end, h, vlim, True)
 
     def _rest_from_one_queue(self, end, h, vlim, at_start):

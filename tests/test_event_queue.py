@@ -262,24 +262,24 @@ def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, na
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name", ["walls-f64-radius", "periodic-f64-area"])
-def test_parts_with_a_full_undo_log_equal_rounds(circles_cpu, monkeypatch, name):
-    """The parts' events log the counts and sums they change (`event.queue_parts`), for a step
-    that must run again to put them back. With a log far too short for a step's events, a step
-    that fills it is put back (positions and velocities from the backup, counts and sums from the
-    log) and runs from one queue, and the log doubles for later steps: the state, the sums and
-    the event log still equal the rounds' bit for bit. The scene with radii has steps cut
-    short too (their redo puts the sums back from the log)."""
+def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
+    """The parts' events write what they add to the counts and sums to a log, added once the
+    step is done (`event.queue_parts`, `event.apply_sums`). With a log far too short for a
+    step's events, a step that fills it is put back (positions and velocities from the backup,
+    the log dropped) and runs from one queue, and the log doubles for later steps: the state,
+    the sums and the event log still equal the rounds' bit for bit. The scene with radii has
+    steps cut short too (their redo drops the log of the windows it ran)."""
     from circles import event, simulation
 
     rounds = run(circles_cpu, monkeypatch, PARTS_SCENES[name], False)
     on_threads(monkeypatch)
     monkeypatch.setattr(event, "PART_CIRCLES", 200)
-    monkeypatch.setattr(simulation, "UNDO_PER_CIRCLE", 0.002)  # 3 entries for 1500 circles
-    monkeypatch.setattr(simulation, "UNDO_MOST_PER_CIRCLE", 0.05)
+    monkeypatch.setattr(simulation, "SUM_LOG_PER_CIRCLE", 0.002)  # 3 entries for 1500 circles
+    monkeypatch.setattr(simulation, "SUM_LOG_MOST_PER_CIRCLE", 0.05)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim.parts_run > 0
-    assert sim.undo_log_full >= 2  # filled again after it first grew
-    assert sim._undo_log[0].shape[0] == int(0.05 * sim.n)  # grown to its most
+    assert sim.sum_log_full >= 2  # filled again after it first grew
+    assert sim._sum_log[0].shape[0] == int(0.05 * sim.n)  # grown to its most
     assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
     assert sim.cut_steps == rounds.cut_steps
     if name.endswith("-radius"):
