@@ -100,6 +100,18 @@ class _StepStart:
 STEP_START = _StepStart()
 
 
+class Same:
+    """In place of an array whose entries are all one value (every circle's radius or inverse
+    mass in a scene of equal circles), that value: read from a kernel's argument, not from
+    memory at every circle, in the same type, so every result is the same number."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __getitem__(self, i):
+        return self.value
+
+
 def _at_step_start(tau) -> bool:
     """Whether the clocks `tau` are `STEP_START` (known when a kernel compiles): then a time of
     impact starts from the positions themselves, with no advance along the velocities."""
@@ -1652,7 +1664,8 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                 sorted_ids: ndarr, ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32,
                 parts: ti.i32, box_w: ti.f64,
                 box_h: ti.f64, t_end: ti.f64, until: ti.f64, vlim: ti.f64, t_offset: ti.f64, first: ti.i32, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, per_bucket: ti.i32,
-                most_per_circle: ti.i32, real: ti.template(), record: ti.template(), periodic: ti.template()):
+                most_per_circle: ti.i32, r_same: ti.f64, w_same: ti.f64, real: ti.template(),
+                record: ti.template(), periodic: ti.template(), same: ti.template()):
     """The events up to `until` of a step over [0, t_end] of circles split into parts
     (`split_parts`, one grid level), from the events the circles hold (`repredict`), or with
     `first` (the step's first window) from the events each part predicts for its circles
@@ -1679,6 +1692,9 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
     a head array made for another width than the compiled one was written past its end."""
     n = pos.shape[0]
     queue = ti.static((heap, where, heap_t, head, nxt, prv, pending))
+    # With `same`, every circle's radius and inverse mass are r_same and w_same (`Same`).
+    rad, wmass = ti.static((Same(ti.cast(r_same, real)), Same(ti.cast(w_same, real))) if same else
+                           (radius, inv_mass))
     info[3 * parts + 1] = 0  # parts taken
     if first != 0:
         sum_at[0] = 0  # the step's sum log starts empty
@@ -1709,15 +1725,15 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
                             copy_state(i, (pos, vel), (b_pos, b_vel))
-                            _first_wall_event(i, pos, vel, radius, STEP_START, ids, ev_t, ev_p, box, horizon, real,
+                            _first_wall_event(i, pos, vel, rad, STEP_START, ids, ev_t, ev_p, box, horizon, real,
                                               periodic)
                     for q in range(s_lo, items):
                         s, i, take = _member(q, k, s_hi, c0, label, claimed, sorted_ids)
                         if take:
                             pairs_once(s, i, cell_of[i], True, cell_start, sorted_ids, ncx, ncy, rows, segs,
-                                       periodic, _pair_in_part, (pos, vel, radius, STEP_START, ids, ev_t, ev_p,
+                                       periodic, _pair_in_part, (pos, vel, rad, STEP_START, ids, ev_t, ev_p,
                                                                  box, horizon, real, periodic,
-                                                                 own_values(i, pos, vel, radius, STEP_START), label,
+                                                                 own_values(i, pos, vel, rad, STEP_START), label,
                                                                  k, touched, dirty))
                 size = 0
                 for q in range(s_lo, items):
@@ -1729,7 +1745,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                             size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
                 most = ti.cast(ti.min(ti.cast(size_k, ti.i64) * most_per_circle, 1 << 30), ti.i32)
                 reached, unused = _drain(size, horizon, stop, t_end, most, scale, nb, off, hb, queue,
-                                         (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
+                                         (pos, vel, rad, wmass, tau, ids, ev_t, ev_p, stamp),
                                          (pair_count, virial, wall_count, wall_impulse),
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,

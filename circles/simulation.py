@@ -712,6 +712,7 @@ class Simulation:
         self._color = np.asarray(color, dtype=np.uint8).copy()
         self._rmax = float(self._radius.max())
         self._rmin = float(self._radius.min())
+        self._same = self._same_circles()
         real = self._real
         self.pos = ti.Vector.ndarray(2, real, shape=n)
         self.vel = ti.Vector.ndarray(2, real, shape=n)
@@ -826,6 +827,15 @@ class Simulation:
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
         # The split's absolute allowance on links, against round-off in the window's positions.
         self._link_allowance = LINK_ALLOWANCE_ULPS * float(np.finfo(self._np_real).eps) * max(self.box)
+
+    def _same_circles(self):
+        """(radius, inverse mass) as the kernels store them when every circle has the same ones,
+        else None: the parts' queues then read them from an argument (`event.Same`)."""
+        radii = self._radius.astype(self._np_real)
+        inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
+        if len(radii) and np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]):
+            return float(radii[0]), float(inv_mass[0])
+        return None
 
     def _make_sum_log(self, size):
         """The parts' sum log (`event.queue_parts`) of `size` entries: a circle's index (or a
@@ -1389,7 +1399,7 @@ class Simulation:
                                   parts, w, hgt, end,
                                   min(t1, end), vlim, self._time, int(done == 0), self._counters, self._log_t,
                                   self._log_i, self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE,
-                                  self._real, record, periodic)
+                                  *(self._same or (0.0, 0.0)), self._real, record, periodic, self._same is not None)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]
                 if np.any(reached == -2):

@@ -182,7 +182,9 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     circle put back), in either precision, and with room for a sixteenth of the circles in the
     claims, those cuts come in later windows too (asserted); in the periodic box
     the strips' borders wrap around (the last strip's is with the first). With room for no
-    claims at all every split fails, and the steps fall back to one queue for all circles."""
+    claims at all every split fails, and the steps fall back to one queue for all circles.
+    Scenes of equal circles run the parts with the radius and inverse mass as the queue's
+    arguments (`event.Same`), the others with their arrays, as the rounds do."""
     from circles import event, simulation
 
     rounds = run(circles_cpu, monkeypatch, PARTS_SCENES[name], False)
@@ -207,6 +209,7 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     monkeypatch.setattr(simulation.Simulation, "_restore", counted_restore)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim._part_shape()[0] >= 4
+    assert (sim._same is not None) == np.isscalar(PARTS_SCENES[name]["radius"])
     assert sim.grid.transposed == name.endswith("-wide") == rounds.grid.transposed
     if claims in (4, 16):
         assert sim.parts_run >= sim.steps  # every step ran in parts, one window or more
