@@ -1526,8 +1526,8 @@ def _claim_cluster(i, s, b, t, lo, hi, box, pos: ti.template(), vel: ti.template
 def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr, claimed: ndarr, reach: ndarr,
                 touched: ndarr, dirty: ndarr, info: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr,
                 ncx: ti.i32, ncy: ti.i32, rows: ti.i32, segs: ti.i32, rows_per: ti.i32, parts: ti.i32, box_w: ti.f64,
-                box_h: ti.f64, t: ti.f64, window: ti.f64, vlim: ti.f64, allowance: ti.f64,
-                periodic: ti.template()) -> ti.i32:
+                box_h: ti.f64, t: ti.f64, window: ti.f64, vlim: ti.f64, allowance: ti.f64, r_same: ti.f64,
+                real: ti.template(), periodic: ti.template(), same: ti.template()) -> ti.i32:
     """Split the circles into `parts` parts (see above): strips of `rows_per` rows of cells (the
     last takes the rest), circle i of strip k labelled k, except the clusters of linked
     circles (see above: at time t, for the window of length `window` that the parts run, the
@@ -1542,6 +1542,7 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
     (rows, segs): see `geometry.spans`. Clears every circle's flags `touched` and `dirty` for the
     window's searches (`queue_parts`; in its pass over every circle, not a pass of its own)."""
     n = pos.shape[0]
+    rad, = ti.static((Same(ti.cast(r_same, real)),) if same else (radius,))  # `Same` with `same`
     for i in range(n):
         label[i] = _strip_of(cell_of[i], ncx, rows_per, parts, periodic)
         reach[i] = -1.0
@@ -1573,17 +1574,17 @@ def split_parts(pos: ndarr, vel: ndarr, tau: ndarr, radius: ndarr, label: ndarr,
                         break
                     i = sorted_ids[s]
                     if label[i] >= 0:  # else claimed with its cluster already
-                        xp, rx = _link_origin(i, t, box, pos, vel, tau, radius, links, periodic)
+                        xp, rx = _link_origin(i, t, box, pos, vel, tau, rad, links, periodic)
                         crosses = False
                         for seg in range(segs):
                             a_lo, a_hi = neighbour_range(cell_of[i], 2, seg, cell_start, ncx, ncy, periodic)
                             for k in range(a_lo, a_hi):
                                 if not crosses:
-                                    if _linked(xp, rx, sorted_ids[k], t, box, pos, vel, tau, radius, links,
+                                    if _linked(xp, rx, sorted_ids[k], t, box, pos, vel, tau, rad, links,
                                                periodic):
                                         crosses = True
                         if crosses:
-                            top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, radius,
+                            top = _claim_cluster(i, s, b, t, top, (b + 1) * share, box, pos, vel, tau, rad,
                                                  label, claimed, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
                                                  segs, links, periodic)
                 if top < 0:
@@ -1642,14 +1643,15 @@ def _pair_in_part(i, j, a: ti.template()):
 def repredict(pos: ndarr, vel: ndarr, radius: ndarr, tau: ndarr, ids: ndarr, ev_t: ndarr, ev_p: ndarr,
               dirty: ndarr, touched: ndarr, cell_of: ndarr, cell_start: ndarr, sorted_ids: ndarr, ncx: ti.i32,
               ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, scalars: ndarr,
-              real: ti.template(), periodic: ti.template()):
+              r_same: ti.f64, real: ti.template(), periodic: ti.template(), same: ti.template()):
     """The events up to t_end of the circles flagged dirty (a touched circle, or one whose
     partner is, searches all its neighbours; see `_predict`), with one grid level, before a
     later window of a step in parts: the circles whose searches met a neighbour in another part
     (`_earliest`, `_pair_in_part`). The dirty flags are cleared as they are read; the touched
     ones are left for the next split to clear (`split_parts`), which comes before any other
-    reader."""
-    _predict(pos, vel, radius, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
+    reader. With `same`, every radius is r_same (`Same`)."""
+    rad, = ti.static((Same(ti.cast(r_same, real)),) if same else (radius,))
+    _predict(pos, vel, rad, tau, ids, ev_t, ev_p, dirty, touched, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
              segs, box_w, box_h, t_end, scalars, real, periodic, False, False)
 
 
