@@ -1257,9 +1257,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                ncy: ti.i32, rows: ti.i32, segs: ti.i32, box_w: ti.f64, box_h: ti.f64, t_end: ti.f64, vlim: ti.f64,
                t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, speed_out: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
-               r_cut: ti.f64, margin: ti.f64, most: ti.i32, per_bucket: ti.i32, real: ti.template(),
-               periodic: ti.template(), record: ti.template(), two_level: ti.template(), serial: ti.template(),
-               at_start: ti.template()) -> ti.f64:
+               r_cut: ti.f64, margin: ti.f64, most: ti.i32, per_bucket: ti.i32, r_same: ti.f64, w_same: ti.f64,
+               real: ti.template(), periodic: ti.template(), record: ti.template(), two_level: ti.template(),
+               serial: ti.template(), at_start: ti.template(), same: ti.template()) -> ti.f64:
     """A whole step from one queue (see above), every circle moved to its end at the last
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
@@ -1275,17 +1275,20 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     is 0, as at a step's start, and the first predictions read none (`STEP_START`); and, with
     `serial`, every circle holds no event, as this kernel's finish leaves it on one thread (and
     the set-up), so that the circles take their walls in the pairs' pass (`_first_events_once`
-    with `fresh`). A simulation whose loops run on one thread steps only here."""
+    with `fresh`). A simulation whose loops run on one thread steps only here. With `same`,
+    every circle's radius and inverse mass are r_same and w_same (`Same`)."""
     n = pos.shape[0]
+    rad, wmass = ti.static((Same(ti.cast(r_same, real)), Same(ti.cast(w_same, real))) if same else
+                           (radius, inv_mass))
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
     reached = t_end
     if ti.static(at_start):
-        _first_predictions(pos, vel, radius, STEP_START, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx,
+        _first_predictions(pos, vel, rad, STEP_START, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx,
                            ncy, rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
                            r_cut, margin, real, periodic, two_level, serial, True)
     else:
-        _first_predictions(pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
+        _first_predictions(pos, vel, rad, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
                            rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
                            margin, real, periodic, two_level, serial, False)
     # Buckets: one per `per_bucket` circles (QUEUE_BUCKET_CIRCLES when the head array was made),
@@ -1308,7 +1311,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
             if ev_p[i] != NO_EVENT:
                 size = _queue_put(i, size, scale, nb, queue, ev_t, ev_p, ids, n, 0, 0)
         reached, horizon = _drain(size, horizon, horizon, reached, most, scale, nb, 0, 0, queue,
-                                  (pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp),
+                                  (pos, vel, rad, wmass, tau, ids, ev_t, ev_p, stamp),
                                   (pair_count, virial, wall_count, wall_impulse),
                                   (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,

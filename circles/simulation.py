@@ -830,7 +830,7 @@ class Simulation:
 
     def _same_circles(self):
         """(radius, inverse mass) as the kernels store them when every circle has the same ones,
-        else None: the parts' queues then read them from an argument (`event.Same`)."""
+        else None: the event queues then read them from an argument (`event.Same`)."""
         radii = self._radius.astype(self._np_real)
         inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
         if len(radii) and np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]):
@@ -1324,8 +1324,8 @@ class Simulation:
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self._time, self._counters, self._log_t, self._log_i,
                                    self._log_j, self._speed_out, *levels, event.most_events(self.n),
-                                   self._per_bucket, real, periodic, record, two,
-                                   self._serial, at_start)
+                                   self._per_bucket, *(self._same or (0.0, 0.0)), real, periodic, record, two,
+                                   self._serial, at_start, self._same is not None)
         self.rounds += 1
         # queue_step's finish left the largest speed in _speed_out; its return synchronised.
         self._known_speed = reductions.speed_in(self._speed_view)
