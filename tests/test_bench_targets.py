@@ -115,7 +115,7 @@ def test_kept_runs_read_back_from_their_csvs():
     intel, arch = targets.read_run(ROOT / "outputs" / "bench" / "intel-xeon-processor")
     rows = targets.evaluate(intel, arch)
     assert [met for _, _, met in rows] == ["yes", "no", "yes", "yes", "yes", "yes", "yes", "yes"]
-    assert rows[0][1] == "42.6 M [41.9 M, 43.2 M]"
-    assert rows[1][1] == "12.4 M [11.9 M, 12.6 M] and 1.2 M collisions/s"
-    assert rows[2][1].startswith("discrete 51.3 times [45.1, 52.6]")
-    assert rows[3][1] == "discrete 1.19 (1e5 against 1e6); event 1.33 (1e5 against 1e4)"
+    assert rows[0][1] == "49.6 M [48.6 M, 51.1 M]"
+    assert rows[1][1] == "15.2 M [14.9 M, 15.6 M] and 1.48 M collisions/s"
+    assert rows[2][1].startswith("discrete 43.5 times [27.5, 46.1]")
+    assert rows[3][1] == "discrete 1.50 (1e4 against 1e5); event 1.28 (1e5 against 1e6)"
