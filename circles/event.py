@@ -1089,8 +1089,8 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
     (counters, log_t, log_i, log_j); `most`: the events allowed; off, hb, part: see `_earliest`;
     log_sums: () or (sum_i, sum_s, sum_at, chunk), the log to which each event writes what it
     adds to the counts and sums instead (`_add_sums`, one entry an event, taken before it); when
-    the log is full the queue stops before the event, and returns reached = -3. Events after `until` (at most the horizon) are
-    left in the queue."""
+    the log is full the queue stops before the event, and returns reached = -3. Events after
+    `until` (at most the horizon) are left in the queue."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
@@ -1130,8 +1130,8 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
             x_sum = u_at
             u_at += 1
             log_sums[0][x_sum] = -1 - n  # no sums, unless the event writes them
-        # Where the event adds to its sums: the arrays, or the log's entry u_at.
-        entry = ti.static(log_sums[0:2] + (x_sum,))  # (sum_i, sum_s, x), or just x: no log
+        # Where the event adds to its sums (`_add_sums`): the log's entry x_sum, or the arrays.
+        entry = ti.static(log_sums[0:2] + (x_sum,))  # (sum_i, sum_s, x_sum), or (x_sum,): no log
         if p >= 0:
             if ev_p[p] != c or ev_t[p] != e:
                 reached = -1.0
