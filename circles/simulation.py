@@ -782,10 +782,8 @@ class Simulation:
             self._walled = ti.ndarray(ti.i32, shape=n)
             for arr in (self._picked, self._marked):
                 reductions.fill_i32(arr, 0)
-            # As the kernels see them: radii and inverse masses rounded to the precision.
-            radii = self._radius.astype(self._np_real)
-            inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
-            self._uniform = DISCRETE_UNIFORM and bool(np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]))
+            # Equal radii and inverse masses as the kernels see them (`_same_circles`).
+            self._uniform = DISCRETE_UNIFORM and self._same is not None
             # The first round of a step in one part per thread (`discrete._first_round_in_parts`).
             self._first_parts = DISCRETE_FIRST_IN_PARTS and count_parts() > 1
             # A step's stages on the CPU's threads as one team (`discrete.team_step`).
@@ -830,7 +828,8 @@ class Simulation:
 
     def _same_circles(self):
         """(radius, inverse mass) as the kernels store them when every circle has the same ones,
-        else None: the event queues then read them from an argument (`event.Same`)."""
+        else None: the event queues then read them from an argument (`event.Same`), and the
+        discrete kernels the first circle's (`discrete.per_circle`)."""
         radii = self._radius.astype(self._np_real)
         inv_mass = (self._mass_unit / self._mass).astype(self._np_real)
         if len(radii) and np.all(radii == radii[0]) and np.all(inv_mass == inv_mass[0]):
