@@ -836,9 +836,10 @@ class Simulation:
             return float(radii[0]), float(inv_mass[0])
         return None
 
-    def _same_radius(self):
-        """(radius,) of `_same_circles`, or (0.0,) for circles of several radii."""
-        return (self._same[0] if self._same else 0.0,)
+    def _same_args(self):
+        """(radius, inverse mass) of `_same_circles`, or zeros (unread) for circles of several,
+        as the event kernels take them."""
+        return self._same or (0.0, 0.0)
 
     def _make_sum_log(self, size):
         """The parts' sum log (`event.queue_parts`) of `size` entries: a circle's index (or a
@@ -1323,7 +1324,7 @@ class Simulation:
                                    self.wall_impulse,
                                    *g, w, hgt, h, vlim, self._time, self._counters, self._log_t, self._log_i,
                                    self._log_j, self._speed_out, *levels, event.most_events(self.n),
-                                   self._per_bucket, *(self._same or (0.0, 0.0)), real, periodic, record, two,
+                                   self._per_bucket, *self._same_args(), real, periodic, record, two,
                                    self._serial, at_start, self._same is not None)
         self.rounds += 1
         # queue_step's finish left the largest speed in _speed_out; its return synchronised.
@@ -1374,14 +1375,14 @@ class Simulation:
                 if done > 0:
                     event.repredict(self.pos, self.vel, self.radius, self.tau, self.ids, self._ev_t, self._ev_p,
                                     self._dirty_w, self._touched, *cell_args, w, hgt, end, self._scalars,
-                                    *self._same_radius(), self._real, periodic, self._same is not None)
+                                    self._same_args()[0], self._real, periodic, self._same is not None)
                 while True:
                     t1 = h if done + 1 >= self._windows else h * (done + 1) / self._windows
                     # The circles' reaches are kept in _d1, the queues' scratch of heap times.
                     if event.split_parts(self.pos, self.vel, self.tau, self.radius, self._label, self._claimed,
                                          self._d1, self._touched, self._dirty_w, self._part_info, *cell_args,
                                          rows_per, parts, w, hgt, t0, min(t1, end) - t0, vlim,
-                                         self._link_allowance, *self._same_radius(), self._real, periodic,
+                                         self._link_allowance, self._same_args()[0], self._real, periodic,
                                          self._same is not None):
                         break
                     if self._windows >= MOST_WINDOWS:
@@ -1403,7 +1404,7 @@ class Simulation:
                                   parts, w, hgt, end,
                                   min(t1, end), vlim, self._time, int(done == 0), self._counters, self._log_t,
                                   self._log_i, self._log_j, self._per_bucket, event.MOST_EVENTS_PER_CIRCLE,
-                                  *(self._same or (0.0, 0.0)), self._real, record, periodic,
+                                  *self._same_args(), self._real, record, periodic,
                                   self._same is not None)
                 self.parts_run += 1
                 reached = self._part_result.to_numpy()[:parts]

@@ -368,7 +368,7 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     reductions.fill_i32(sim._dirty_w, 1)
     assert event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, sim._claimed, sim._d1,
                              sim._touched, sim._dirty_w, sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs,
-                             rows_per, parts, *box, 0.0, window, vlim, sim._link_allowance, *sim._same_radius(),
+                             rows_per, parts, *box, 0.0, window, vlim, sim._link_allowance, sim._same_args()[0],
                              sim._real, periodic, sim._same is not None)
     assert not sim._touched.to_numpy().any() and not sim._dirty_w.to_numpy().any()
     label = sim._label.to_numpy()
@@ -704,7 +704,7 @@ def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_c
     def split(claimed):
         ok = event.split_parts(sim.pos, sim.vel, sim.tau, sim.radius, sim._label, claimed, sim._d1, sim._touched,
                                sim._dirty_w, sim._part_info, g.cell_of, g.cell_start, g.sorted_ids, g.ncx, g.ncy, rows, segs, rows_per, parts,
-                               *box, 0.0, window, vlim, sim._link_allowance, *sim._same_radius(), sim._real,
+                               *box, 0.0, window, vlim, sim._link_allowance, sim._same_args()[0], sim._real,
                                False, sim._same is not None)
         info = sim._part_info.to_numpy()
         lo, hi = info[parts + 1:parts + 1 + borders], info[2 * parts + 1:2 * parts + 1 + borders]
