@@ -290,6 +290,39 @@ def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_equal_radii_with_masses_of_their_own_keep_the_arrays(circles_cpu, monkeypatch):
+    """The event kernels take the radius and inverse mass as arguments (`event.Same`) only when
+    both are one value for every circle as the kernels store them (`Simulation._same_circles`):
+    circles of one radius with masses given one by one keep the arrays, and their queue in
+    parts still equals the rounds bit for bit; with one mass for all they take the arguments,
+    the values the arrays would hold."""
+    from circles import event, simulation
+
+    scene = PARTS_SCENES["walls-f32-equal"]
+    start = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene)).state()
+    mass = np.random.default_rng(5).uniform(0.5, 2.0, scene["n"])
+
+    def run_own(queue, masses):
+        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        sim = circles_cpu.Simulation.from_arrays(start.pos, start.vel, scene["radius"], masses, box=scene["box"],
+                                                 precision="f32", record_events=100_000)
+        sim.step(25)
+        return sim
+
+    rounds = run_own(False, mass)
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    sim = run_own(True, mass)
+    assert sim._parts and sim.parts_run > 0 and sim._same is None
+    assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
+    equal = circles_cpu.Simulation.from_arrays(start.pos, start.vel, scene["radius"], np.full(scene["n"], 3.0),
+                                               box=scene["box"], precision="f32")
+    assert equal._same == (equal.radius.to_numpy()[0], equal.inv_mass.to_numpy()[0])
+    assert np.all(equal.radius.to_numpy() == equal._same[0])
+    assert np.all(equal.inv_mass.to_numpy() == equal._same[1])
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cpu, monkeypatch):
     """400 circles at area fraction 0.75 with their loops on the threads and no room for claims:
     every split fails (clusters cross the borders), so each step runs from one queue, whose
