@@ -46,7 +46,7 @@ import taichi as ti
 
 from . import launch
 from .discrete import NLARGE
-from .grid import PART_ITERATIONS, count_parts
+from .grid import PART_ITERATIONS, _part_range, count_parts
 from .reductions import offer_speed, speed_of, speed_result
 from .geometry import (NEVER, NO_EVENT, cell_coords, displacement, forward_fits, key_less, neighbour_range,
                        pairs_once, run_parts, wide_row)
@@ -1208,9 +1208,7 @@ def apply_sums(sum_i: ndarr, sum_s: ndarr, sum_at: ndarr, pair_count: ndarr, vir
     threads = ti.static(max(count_parts(), 1))
     for it in range(threads * PART_ITERATIONS):
         if it % PART_ITERATIONS == 0:
-            k = it // PART_ITERATIONS
-            lo = ti.cast(ti.cast(n, ti.i64) * k // threads, ti.i32)
-            hi = ti.cast(ti.cast(n, ti.i64) * (k + 1) // threads, ti.i32)
+            lo, hi = _part_range(n, it // PART_ITERATIONS, threads)
             for x in range(ti.min(sum_at[0], sum_i.shape[0])):
                 e = sum_i[x]
                 i = ti.select(e >= 0, e, -1 - e)
