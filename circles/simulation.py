@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import taichi as ti
 
-from . import discrete, event, launch, placement, reductions, team
+from . import discrete, event, launch, observables, placement, reductions, team
 from .backend import current_arch, ensure_init, on_restart, runtime, serial_loops
 from .geometry import NEVER, NO_EVENT, spans
 from .grid import Grid, count_parts
@@ -1590,12 +1590,14 @@ class Simulation:
         time t, the walls' P = delta wall_impulse / (t perimeter), and in 2D P A = N kT +
         delta virial / (2 t) with N kT the kinetic energy (the centres' box, W - 2r by H - 2r,
         in a walled box); max_overlap, the largest overlap of two circles as a fraction of
-        their contact distance."""
+        their contact distance; pressure, compressibility (Z = P A / (N kT)) and wall_pressure,
+        averaged since time 0 (NaN at time 0, wall_pressure NaN in a periodic box: see
+        `circles.observables`)."""
         self._live()
         pos, vel, pair_count, wall_count, virial, wall_impulse = self._download()
         vel = vel.astype(np.float64)
         m = self._mass
-        return {
+        stats = {
             "time": self.time,
             "kinetic_energy": float(0.5 * np.sum(m * (vel[:, 0] ** 2 + vel[:, 1] ** 2))),
             "momentum": (float(np.sum(m * vel[:, 0])), float(np.sum(m * vel[:, 1]))),
@@ -1605,6 +1607,8 @@ class Simulation:
             "wall_impulse": float(np.sum(wall_impulse)),
             "max_overlap": self._max_overlap(),
         }
+        stats.update(observables.since_start(stats, self.n, self.box, self.boundary, float(np.mean(self._radius))))
+        return stats
 
     def events(self) -> np.ndarray:
         """The collisions the event scheme executed so far, when made with record_events=CAPACITY

@@ -1,0 +1,84 @@
+"""Observables of a run, from the totals that `Simulation.stats` keeps.
+
+Units: Boltzmann's constant is 1, so the temperature kT is the kinetic energy per circle
+(two translational degrees of freedom: kinetic energy = N kT). Lengths, times and masses
+are the scene's own.
+
+Pressure comes two ways:
+
+- the virial, from the pair collisions: in 2D, over a time t,
+  ``P A = N kT + virial / (2 t)``, where virial is the sum over pair collisions of
+  ``(r_i + r_j) |J|`` (J the impulse). The compressibility factor is
+  ``Z = P A / (N kT) = 1 + virial / (2 t N kT)``. In a walled box the wall's own virial
+  closes the identity with A the area open to the centres, ``(W - 2r)(H - 2r)``;
+- the walls, in a walled box: ``P = wall_impulse / (t L)``, with wall_impulse the sum over
+  wall hits of ``2 m |v_n|`` and L the perimeter open to the centres,
+  ``2 (W - 2r) + 2 (H - 2r)``.
+
+Both are exact identities for circles of one radius r; with several radii the walled box's
+areas use the mean radius, an approximation. Over a time of zero (at t = 0) the pressures
+are not defined and are NaN.
+"""
+from __future__ import annotations
+
+import math
+
+#: The columns of a stats table (`interval`), in order.
+COLUMNS = ("time", "kinetic_energy", "temperature", "momentum_x", "momentum_y", "pair_collisions",
+           "wall_collisions", "collision_rate", "pressure", "compressibility", "wall_pressure", "max_overlap")
+
+
+def centre_box(box, boundary, radius):
+    """(width, height) of the region the circles' centres move in: the box itself when it is
+    periodic, the box less a radius at each wall (`radius`: the mean radius) when walled."""
+    w, h = float(box[0]), float(box[1])
+    if boundary == "periodic":
+        return w, h
+    return w - 2.0 * radius, h - 2.0 * radius
+
+
+def pressures(duration, virial, wall_impulse, kinetic_energy, n, box, boundary, radius):
+    """{pressure, compressibility, wall_pressure} over `duration` of simulated time, from the
+    growth of the virial and of the wall impulse over it, at the kinetic energy given.
+    wall_pressure is NaN in a periodic box; every value is NaN over a duration of 0."""
+    w, h = centre_box(box, boundary, radius)
+    if duration > 0 and kinetic_energy > 0:
+        z = 1.0 + virial / (2.0 * duration * kinetic_energy)
+        p = z * kinetic_energy / (w * h)
+    else:
+        z = p = math.nan
+    if boundary == "periodic" or not duration > 0:
+        wall = math.nan
+    else:
+        wall = wall_impulse / (duration * 2.0 * (w + h))
+    return {"pressure": p, "compressibility": z, "wall_pressure": wall}
+
+
+def since_start(stats, n, box, boundary, radius):
+    """The pressures averaged from time 0 to `stats["time"]` (see `pressures`)."""
+    return pressures(stats["time"], stats["virial"], stats["wall_impulse"], stats["kinetic_energy"], n, box,
+                     boundary, radius)
+
+
+def interval(before, after, n, box, boundary, radius):
+    """A row of the stats table (`COLUMNS`) for the interval between two `stats()` taken by one
+    simulation: the state at its end, the collision counts since the start, and the rates and
+    pressures over the interval. collision_rate is the collisions a circle takes part in per
+    unit time, 2 pair collisions / (N t): the collision frequency of kinetic theory (Enskog's)."""
+    duration = after["time"] - before["time"]
+    energy = after["kinetic_energy"]
+    pairs = after["pair_collisions"] - before["pair_collisions"]
+    row = {
+        "time": after["time"],
+        "kinetic_energy": energy,
+        "temperature": energy / n,
+        "momentum_x": after["momentum"][0],
+        "momentum_y": after["momentum"][1],
+        "pair_collisions": after["pair_collisions"],
+        "wall_collisions": after["wall_collisions"],
+        "collision_rate": 2.0 * pairs / (n * duration) if duration > 0 else math.nan,
+        **pressures(duration, after["virial"] - before["virial"], after["wall_impulse"] - before["wall_impulse"],
+                    energy, n, box, boundary, radius),
+        "max_overlap": after["max_overlap"],
+    }
+    return {name: row[name] for name in COLUMNS}
