@@ -10,9 +10,7 @@ import math
 
 def liu_z(eta):
     """Compressibility factor Z = P A / (N kT) of the hard-disk fluid, Liu's fit (accurate to
-    about 0.1% in the fluid): Z = (1 + eta^2/8 + eta^3/18 - 4 eta^4/21) / (1 - eta)^2.
-    H. Liu, "Carnahan-Starling type equations of state for stable hard disk and hard sphere
-    fluids", Mol. Phys. 119, e1886364 (2021)."""
+    about 0.1% in the fluid): Z = (1 + eta^2/8 + eta^3/18 - 4 eta^4/21) / (1 - eta)^2."""
     return (1 + eta ** 2 / 8 + eta ** 3 / 18 - 4 * eta ** 4 / 21) / (1 - eta) ** 2
 
 
