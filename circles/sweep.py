@@ -42,6 +42,7 @@ import sys
 import threading
 import time
 import tomllib
+import uuid
 from dataclasses import dataclass, field, fields
 from numbers import Integral, Real
 
@@ -447,7 +448,7 @@ class SweepRun:
 
 def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None):
     """Run the points of `sweep` that DIR/results.csv does not hold yet, a task per (point,
-    repeat): on the Dask `client` (distributed.Client) when given, else one by one in this
+    repeat): on the Dask `client` (each task's key ends in -POINT-REPEAT) (distributed.Client) when given, else one by one in this
     process. A row is appended to DIR/results.csv when a point's last task ends; `on_row(row)`
     and `on_result((point, repeat), result)` are called as they come. `threads`: Taichi's
     threads in each worker process (None: the worker's own thread count)."""
@@ -483,7 +484,8 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         else:
             from distributed import as_completed
 
-            tag = _fingerprint(sweep)[:12]
+            # A key of this run's own: keys of a stopped run may still be held, cancelled, by the scheduler.
+            tag = f"{_fingerprint(sweep)[:12]}-{uuid.uuid4().hex[:8]}"
             futures = {client.submit(run_task, *args(task), key=f"circles-sweep-{tag}-{task[0]}-{task[1]}",
                                      pure=False): task for task in tasks}
             try:
