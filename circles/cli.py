@@ -642,6 +642,7 @@ def main(argv=None):
         if _import_the_engine():
             raise KeyboardInterrupt
         scene, options = _prepare(argv, made)
+        importlib.import_module(".kernel_cache", __package__).announce(scene, options["arch"], options["threads"])
         status = _run(scene, options)
         made.clear()
         return status

@@ -666,6 +666,9 @@ def main(argv):
             where = f"a local cluster of {workers} worker process{'es' if workers > 1 else ''}, " \
                     f"{threads} thread{'s' if threads > 1 else ''} each"
         print(f"sweep       {total} points x {sweep.repeats} repeats on {where}", flush=True)
+        from .kernel_cache import announce
+        from .scene import Scene
+        announce(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", threads or 0, stream=sys.stdout)
         count = [0]
 
         def on_row(row):

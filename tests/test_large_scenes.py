@@ -97,3 +97,20 @@ def test_too_dense_names_a_box_and_a_fraction_that_fit(capsys):
     scene = Scene(n=100_000, box=(w, h), radius=(0.03, 0.08))
     assert scene.area_fraction <= phi and scene.area_fraction == pytest.approx(phi, rel=0.01)
     assert w / h == pytest.approx(16 / 9, rel=0.01)
+
+
+def test_the_first_use_of_a_kernel_set_is_announced_once(tmp_path, monkeypatch):
+    import io
+
+    from circles import kernel_cache
+
+    monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "cache"))
+    scene = Scene(n=50, box=(4.0, 3.0), radius=0.1)
+    said = io.StringIO()
+    assert kernel_cache.announce(scene, "cpu", 0, stream=said)
+    assert said.getvalue() == "compiling kernels for this scene; cached for next time\n"
+    assert not kernel_cache.announce(Scene(n=80, box=(5.0, 3.0), radius=0.1, seed=4), "cpu", 0, stream=said)
+    # Another kind of scene, or other threads, builds other kernels.
+    assert kernel_cache.announce(Scene(n=50, box=(4.0, 3.0), radius=(0.05, 0.1)), "cpu", 0, stream=said)
+    assert kernel_cache.announce(scene, "cpu", 1, stream=said)
+    assert said.getvalue().count("compiling") == 3
