@@ -694,8 +694,9 @@ def main(argv):
         print("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun runs the others",
               file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (OSError, RuntimeError, ValueError, TimeoutError) as error:
-        print(f"circles: the sweep failed: {error}", file=sys.stderr)
+    except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler
+        print(f"circles: the sweep failed: {type(error).__name__}: {error}; the points done are in "
+              f"{os.path.join(out, RESULTS)}", file=sys.stderr)
         return EXIT_FAILED
     finally:
         if client is not None:
