@@ -71,10 +71,14 @@ def first_use(kind) -> bool:
 
 
 def announce(scene, arch="auto", threads=0, stream=None):
-    """Print MESSAGE on stderr (or `stream`) when the scene's kernel set is new here."""
+    """Print MESSAGE on `stream` when the scene's kernel set is new here; True when it is. By
+    default the stream is stderr, and only a terminal's: like the progress bar, the message is
+    for a person watching (a script reading stderr gets its errors alone)."""
     import sys
 
-    if first_use(kind_of(scene, arch, threads)):
-        print(MESSAGE, file=stream or sys.stderr, flush=True)
-        return True
-    return False
+    new = first_use(kind_of(scene, arch, threads))
+    if stream is None:
+        stream = sys.stderr if sys.stderr.isatty() else None
+    if new and stream is not None:
+        print(MESSAGE, file=stream, flush=True)
+    return new

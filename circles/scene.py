@@ -256,6 +256,11 @@ def check_area_fraction_value(value):
 def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_BOX[1]):
     """The box (W, H), W / H = aspect, in which n circles of radius r (or uniform in (rmin,
     rmax)) fill the area fraction `fraction` on average: W H = n pi E[r^2] / fraction."""
+    n = scalar(n)
+    if isinstance(n, bool) or not isinstance(n, Integral):
+        raise ValueError(f"n = {n!r} must be a whole number of circles")
+    if n <= 0:
+        raise ValueError(f"n = {n} must be > 0")
     fraction = check_area_fraction_value(fraction)
     rlo, rhi = check_pair_range("radius", radius, lambda v: v > 0)
     aspect = _finite("box aspect", aspect)
