@@ -582,10 +582,13 @@ def plot_sweep(sweep, out):
             e = [float(r[f"{name}_se"]) for _, r in members]
             label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
             ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
-            expected = [theory(sweep, v, r).get(name) for v, r in members]
-            if expected and all(t is not None for t in expected):
+            values, row = members[0]
+            if theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
+                # A smooth curve through the points' range, at the first point's temperature.
+                grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]
+                curve = [theory(sweep, {**values, x_key: g}, row)[name] for g in grid]
                 theory_name = {"compressibility": "Liu", "collision_rate": "Enskog (Liu's g)"}[name]
-                ax.plot(x, expected, "-", color="0.3", lw=1, label=theory_name)
+                ax.plot(grid, curve, "-", color="0.3", lw=1, label=theory_name)
         ax.set_xlabel(x_key)
         ax.set_ylabel(LABELS[name])
         if name == "compressibility" and x_key == "area_fraction":
@@ -641,6 +644,12 @@ def main(argv):
         if os.path.exists(out) and not os.path.isdir(out):
             raise SweepError(f"--out {out} is a file: give a folder")
         read_results(out, sweep)  # another sweep's results are refused before any task
+        if args.workers != 0:
+            try:
+                import distributed  # noqa: F401
+            except ImportError:
+                raise SweepError("circles sweep runs its tasks on Dask, which is not installed: pip install "
+                                 "'circles[sweep]', or give --workers 0 to run them one by one here") from None
     except (UsageError, SweepError) as error:
         print(f"circles: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
