@@ -327,7 +327,7 @@ def _sized_scene_fields(fields, overrides, args):
     aspect of the box given, 16:9 without one) or, for the showcase given --n alone, grown
     with n so that the showcase's area fraction is kept. A --box flag takes the place of the
     file's area_fraction, and --area-fraction that of its box."""
-    from .scene import DEFAULT_BOX, Scene, box_for_area_fraction
+    from .scene import DEFAULT_BOX, Scene, box_for_area_fraction, check_box
 
     merged = {**fields, **overrides}
     if "box" in overrides:
@@ -336,11 +336,10 @@ def _sized_scene_fields(fields, overrides, args):
     if phi is None and not args.scene and "n" in overrides and not {"box", "radius"} & set(overrides):
         phi = Scene.from_dict(SHOWCASE_SCENE).area_fraction
     if phi is not None:
-        box = merged.pop("box", None) or DEFAULT_BOX
+        width, height = check_box(merged.pop("box", None) or DEFAULT_BOX)
         merged.pop("area_fraction", None)
-        aspect = box[0] / box[1] if "box" in overrides or args.scene else DEFAULT_BOX[0] / DEFAULT_BOX[1]
-        n = merged.get("n", Scene.n)
-        merged["box"] = list(box_for_area_fraction(n, merged.get("radius", Scene.radius), phi, aspect))
+        merged["box"] = list(box_for_area_fraction(merged.get("n", Scene.n), merged.get("radius", Scene.radius),
+                                                   phi, width / height))
     return merged
 
 
@@ -351,7 +350,7 @@ def _circle_list(path, fields, args):
     for key in RANDOM_SCENE_FLAGS:
         if getattr(args, key) is not None:
             raise UsageError(f"argument --{key.replace('_', '-')} does not apply to {path}: it lists its circles "
-                             "([[circle]] entries), and --n, --radius, --speed and --seed only "
+                             "([[circle]] entries), and --n, --radius, --speed, --seed and --area-fraction only "
                              "shape random scenes: drop the flag or edit the file")
     try:
         return circle_list_from_dict({**fields, **_scene_overrides(args)})
