@@ -187,3 +187,20 @@ def test_repeat_seeds_are_distinct_and_fixed_by_the_base_seed():
     seeds = [sweeps.repeat_seed(3, r) for r in range(100)]
     assert len(set(seeds)) == 100 and seeds == [sweeps.repeat_seed(3, r) for r in range(100)]
     assert sweeps.repeat_seed(4, 0) not in seeds
+
+
+def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys):
+    """`circles sweep` end to end: its own cluster of two workers, the serial numbers, a plot per
+    observable, and Liu's deviation said; run again, every point is skipped."""
+    sweep, serial_out = serial
+    path = write(tmp_path, TINY)
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "local cluster of 2 worker processes, 1 thread each" in said and "3 points run" in said
+    assert "deviation of Z from Liu's" in said
+    assert table(out) == table(serial_out)
+    for name in sweep.observables:
+        assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    assert "0 points run, 3 already in" in capsys.readouterr().out
