@@ -500,13 +500,14 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
 
 
 def local_cluster(workers, threads_per_worker=1):
-    """A Dask LocalCluster of `workers` worker processes on this machine, quiet, no dashboard."""
+    """A Dask LocalCluster of `workers` worker processes on this machine, quiet, its dashboard on
+    a free port (two sweeps at once do not meet on one)."""
     import logging
 
     from distributed import LocalCluster
 
     return LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
-                        dashboard_address=None, silence_logs=logging.ERROR)
+                        dashboard_address=":0", silence_logs=logging.ERROR)
 
 
 # ---- plots --------------------------------------------------------------------------------

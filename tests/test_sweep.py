@@ -204,3 +204,14 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
         assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
     assert "0 points run, 3 already in" in capsys.readouterr().out
+
+
+def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys):
+    """--scheduler ADDRESS: the tasks go to that cluster's workers, Taichi on each worker's own
+    thread count, and the numbers are the serial ones."""
+    sweep, serial_out = serial
+    address = cluster.scheduler.address
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
+    assert f"the Dask scheduler at {address}" in capsys.readouterr().out
+    assert table(out) == table(serial_out)
