@@ -104,10 +104,6 @@ class Sweep:
                 "equilibrate": self.equilibrate, "measure": self.measure, "blocks": self.blocks,
                 "observables": list(self.observables)}
 
-    def tasks(self):
-        """(point index, repeat) of every task, point by point."""
-        return [(p, r) for p in range(len(self.points)) for r in range(self.repeats)]
-
 
 def repeat_seed(base_seed, repeat):
     """The seed of repeat `repeat`: drawn from numpy's SeedSequence of (base seed, repeat), so
