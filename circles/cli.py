@@ -94,7 +94,7 @@ def _build_parser():
     parser = _Parser(prog="circles", description="Simulate many elastic circles in a box "
                      "and write the run as a video, a GIF or PNG frames.")
     parser.add_argument("--version", action="version", version=version_text())
-    commands = parser.add_subparsers(dest="command", metavar="run")
+    commands = parser.add_subparsers(dest="command", metavar="run | sweep")
     run = commands.add_parser(
         "run", help="simulate a scene and write its frames",
         description="Simulate a scene (the showcase, or SCENE.toml) and write its frames. "
@@ -103,8 +103,12 @@ def _build_parser():
                      help="scene file: Scene fields (or [[circle]] tables listing the "
                           "circles) at top level, a [run] table for the run options")
     scene = run.add_argument_group("scene", _scene_defaults_text())
-    scene.add_argument("--n", type=int, help="number of circles")
+    scene.add_argument("--n", type=circle_count, help="number of circles (1000000, 1_000_000 or 1e6); "
+                       "alone, the showcase's box grows with it, keeping its area fraction")
     scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
+    scene.add_argument("--area-fraction", type=float, metavar="PHI",
+                       help="size the box for the circles to fill this fraction of it, with the aspect "
+                            "of --box (16:9 without it)")
     scene.add_argument("--radius", type=float, nargs="+", metavar="R",
                        help="radius R, or a range RMIN RMAX")
     scene.add_argument("--speed", type=float, nargs="+", metavar="V",
@@ -133,18 +137,39 @@ def _build_parser():
     output.add_argument("--out", metavar="PATH",
                         help=f"*.mp4, *.gif, or a folder for PNG frames (default "
                              f"{DEFAULT_OUT})")
+    from .sweep import add_sweep_command
+    add_sweep_command(commands)
     return parser
+
+
+def circle_count(text):
+    """A number of circles as written on the command line: 1000000, 1_000_000 or 1e6."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of circles: write it as 1000000, "
+                                         "1_000_000 or 1e6") from None
+    if not math.isfinite(value) or value != int(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a whole number of circles: give a whole number "
+                                         "such as 1000000, 1_000_000 or 1e6")
+    return int(value)
 
 
 def _scene_defaults_text():
     """What the scene flags default to, for --help."""
-    from .scene import Scene
+    from .scene import DEFAULT_BOX, Scene
 
     def text(fields):
         return ", ".join(f"{name} {' '.join(f'{x:g}' for x in value) if isinstance(value, (list, tuple)) else value}"
                          for name, value in fields.items())
 
     fields = {name: getattr(Scene, name) for name in Scene.__dataclass_fields__}
+    fields["box"] = DEFAULT_BOX
+    del fields["area_fraction"]
     fields["dt"] = "chosen from the scene"
     return (f"Without SCENE.toml, the showcase: {text(SHOWCASE_SCENE)}. A field that the showcase or "
             f"the file leaves out, and no flag sets, takes Scene's default: {text(fields)}.")
@@ -294,7 +319,28 @@ def check_frame_count(duration, fps):
 
 
 #: Flags that shape a random scene only: refused with a file that lists its circles.
-RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed")
+RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed", "area_fraction")
+
+
+def _sized_scene_fields(fields, overrides, args):
+    """The scene's fields, flags over the file's, with the box made by --area-fraction (the
+    aspect of the box given, 16:9 without one) or, for the showcase given --n alone, grown
+    with n so that the showcase's area fraction is kept. A --box flag takes the place of the
+    file's area_fraction, and --area-fraction that of its box."""
+    from .scene import DEFAULT_BOX, Scene, box_for_area_fraction, check_box
+
+    merged = {**fields, **overrides}
+    if "box" in overrides:
+        merged.pop("area_fraction", None)
+    phi = args.area_fraction
+    if phi is None and not args.scene and "n" in overrides and not {"box", "radius"} & set(overrides):
+        phi = Scene.from_dict(SHOWCASE_SCENE).area_fraction
+    if phi is not None:
+        width, height = check_box(merged.pop("box", None) or DEFAULT_BOX)
+        merged.pop("area_fraction", None)
+        merged["box"] = list(box_for_area_fraction(merged.get("n", Scene.n), merged.get("radius", Scene.radius),
+                                                   phi, width / height))
+    return merged
 
 
 def _circle_list(path, fields, args):
@@ -303,8 +349,8 @@ def _circle_list(path, fields, args):
 
     for key in RANDOM_SCENE_FLAGS:
         if getattr(args, key) is not None:
-            raise UsageError(f"argument --{key} does not apply to {path}: it lists its circles "
-                             "([[circle]] entries), and --n, --radius, --speed and --seed only "
+            raise UsageError(f"argument --{key.replace('_', '-')} does not apply to {path}: it lists its circles "
+                             "([[circle]] entries), and --n, --radius, --speed, --seed and --area-fraction only "
                              "shape random scenes: drop the flag or edit the file")
     try:
         return circle_list_from_dict({**fields, **_scene_overrides(args)})
@@ -335,7 +381,7 @@ def _prepare(argv, made):
         scene = _circle_list(args.scene, fields, args)
     else:
         try:
-            scene = Scene.from_dict({**fields, **_scene_overrides(args)})
+            scene = Scene.from_dict(_sized_scene_fields(fields, _scene_overrides(args), args))
         except (ValueError, TypeError) as error:
             where = f"{args.scene}: " if args.scene else ""
             raise UsageError(f"{where}{error}") from None
@@ -588,11 +634,14 @@ def _import_the_engine():
 def main(argv=None):
     """Entry point of the ``circles`` command; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["sweep"]:
+        return importlib.import_module(".sweep", __package__).main(argv)
     made = []  # folders made for the output, taken away again if the run stops before writing
     try:
         if _import_the_engine():
             raise KeyboardInterrupt
         scene, options = _prepare(argv, made)
+        importlib.import_module(".kernel_cache", __package__).announce(scene, options["arch"], options["threads"])
         status = _run(scene, options)
         made.clear()
         return status

@@ -213,21 +213,72 @@ def area_fraction(radius, box) -> float:
     return float(np.pi * np.sum((r / box[0]) * (r / box[1])))
 
 
+#: The area fraction that the too-dense error proposes: random placement reaches it quickly.
+SUGGESTED_AREA_FRACTION = 0.5
+
+
+def _round_up(x, digits=3):
+    """x rounded up to `digits` significant digits (a box side that, printed, still fits)."""
+    if not x > 0 or not math.isfinite(x):
+        return x
+    scale = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return math.ceil(x / scale * (1 - 1e-12)) * scale
+
+
 def check_area_fraction(fraction, n, box):
     if fraction > DENSEST_PACKING:
         digits = 4  # as many as show the two apart
         while f"{fraction:.{digits}f}" == f"{DENSEST_PACKING:.{digits}f}" and digits < 17:
             digits += 1
+        grow = math.sqrt(fraction / SUGGESTED_AREA_FRACTION)
+        w, h = (_round_up(side * grow) for side in box)
         raise ValueError(f"area fraction {fraction:.{digits}f} of {n} circles in a {box[0]} x {box[1]} box "
                          f"exceeds the densest packing {DENSEST_PACKING:.{digits}f}: use fewer or smaller circles "
-                         "or a bigger box")
+                         f"or a bigger box: {w:.3g} x {h:.3g} holds them at area fraction "
+                         f"{SUGGESTED_AREA_FRACTION} (box = [{w:.3g}, {h:.3g}], or area_fraction = "
+                         f"{SUGGESTED_AREA_FRACTION} in place of the box)")
+
+
+#: The box of a Scene given neither a box nor an area fraction; its aspect is that of the
+#: box made for an area fraction.
+DEFAULT_BOX = (16.0, 9.0)
+
+
+def check_area_fraction_value(value):
+    """An area fraction given to size a box: a finite number in (0, DENSEST_PACKING]."""
+    value = _finite("area_fraction", value)
+    if not 0 < value <= DENSEST_PACKING:
+        raise ValueError(f"area_fraction = {value!r} is out of range: give a fraction > 0 and at most the densest "
+                         f"packing {DENSEST_PACKING:.4f} (below about 0.7 for a fluid)")
+    return value
+
+
+def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_BOX[1]):
+    """The box (W, H), W / H = aspect, in which n circles of radius r (or uniform in (rmin,
+    rmax)) fill the area fraction `fraction` on average: W H = n pi E[r^2] / fraction."""
+    n = scalar(n)
+    if isinstance(n, bool) or not isinstance(n, Integral):
+        raise ValueError(f"n = {n!r} must be a whole number of circles")
+    if n <= 0:
+        raise ValueError(f"n = {n} must be > 0")
+    fraction = check_area_fraction_value(fraction)
+    rlo, rhi = check_pair_range("radius", radius, lambda v: v > 0)
+    aspect = _finite("box aspect", aspect)
+    if not aspect > 0:
+        raise ValueError(f"box aspect {aspect!r} must be > 0")
+    a = rlo / rhi  # E[r^2] = rhi^2 (a^2 + a + 1) / 3, in units of rhi: no square of a length
+    h = rhi * math.sqrt(n * math.pi * (a * a + a + 1.0) / (3.0 * fraction * aspect))
+    return aspect * h, h
 
 
 @dataclass(frozen=True)
 class Scene:
     """What is simulated. Units are world units (box [0, W] x [0, H], y up) and seconds.
 
-    n: number of circles. box: (W, H). radius: r or (rmin, rmax), uniform in the range.
+    n: number of circles. box: (W, H), by default DEFAULT_BOX; or, in its place,
+    area_fraction: the box is then made for the circles to fill that fraction on average, with
+    the aspect of DEFAULT_BOX (`box_for_area_fraction`). Once made, a Scene holds both, the
+    box and the expected area fraction; both given is refused unless they agree. radius: r or (rmin, rmax), uniform in the range.
     speed: (vmin, vmax), uniform speeds in random directions. mass: "radius" (m = r, the
     default), "area" (m = pi r^2) or "equal" (m = 1). boundary: "walls" or "periodic".
     scheme: "event" (exact) or "discrete" (fast, approximate). precision: "f32" or "f64".
@@ -235,7 +286,7 @@ class Scene:
     """
 
     n: int = 10_000
-    box: tuple = (16.0, 9.0)
+    box: tuple | None = None
     radius: tuple | float = (0.02, 0.05)
     speed: tuple = (0.5, 1.0)
     mass: str = "radius"
@@ -244,6 +295,7 @@ class Scene:
     precision: str = "f64"
     dt: float | None = None
     seed: int = 0
+    area_fraction: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "n", scalar(self.n))
@@ -251,8 +303,8 @@ class Scene:
             raise ValueError(f"n = {self.n!r} must be a whole number of circles")
         if self.n <= 0:
             raise ValueError(f"n = {self.n} must be > 0")
-        box = check_box(self.box)
         rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
+        box = self._box_of(rlo, rhi)
         vlo, vhi = check_pair_range("speed", self.speed, lambda v: v >= 0)
         _choice("mass model", self.mass, MASS_MODELS, " (masses of your own go to Simulation.from_arrays)")
         _choice("boundary", self.boundary, BOUNDARIES)
@@ -271,6 +323,21 @@ class Scene:
         object.__setattr__(self, "speed", (vlo, vhi))
         object.__setattr__(self, "dt", dt)
         object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "area_fraction", self.expected_area_fraction_of(self.n, box, rlo, rhi))
+
+    def _box_of(self, rlo, rhi):
+        """The box given, the box made for the area fraction given, or DEFAULT_BOX."""
+        if self.area_fraction is None:
+            return check_box(DEFAULT_BOX if self.box is None else self.box)
+        fraction = check_area_fraction_value(self.area_fraction)
+        if self.box is None:
+            return box_for_area_fraction(self.n, (rlo, rhi), fraction)
+        box = check_box(self.box)
+        held = self.expected_area_fraction_of(self.n, box, rlo, rhi)
+        if not math.isclose(held, fraction, rel_tol=1e-9):
+            raise ValueError(f"box = {list(box)!r} and area_fraction = {fraction!r} are both given, and the box "
+                             f"holds these circles at area fraction {held:.6g}: give one of them")
+        return box
 
     @staticmethod
     def expected_area_fraction_of(n, box, rlo, rhi):
@@ -278,16 +345,12 @@ class Scene:
         (aw, ah), (bw, bh) = (rlo / box[0], rlo / box[1]), (rhi / box[0], rhi / box[1])
         return n * math.pi * (aw * ah + 0.5 * (aw * bh + bw * ah) + bw * bh) / 3.0
 
-    @property
-    def area_fraction(self) -> float:
-        """Expected area fraction of the circles (exact for equal radii)."""
-        return self.expected_area_fraction_of(self.n, self.box, *self.radius)
-
     def to_dict(self) -> dict:
         d = asdict(self)
         d["box"] = list(self.box)
         d["radius"] = list(self.radius)
         d["speed"] = list(self.speed)
+        del d["area_fraction"]  # the box says it
         return d
 
     @classmethod
@@ -300,6 +363,9 @@ class Scene:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"unknown scene key(s) {', '.join(unknown)}: known keys are {', '.join(sorted(known))}")
+        if d.get("box") is not None and d.get("area_fraction") is not None:
+            raise ValueError(f"box = {d['box']!r} and area_fraction = {d['area_fraction']!r} are both given: give "
+                             "one of them (area_fraction makes a box of aspect 16:9 for the circles)")
         kw = dict(d)
         for key in ("box", "radius", "speed"):
             if isinstance(kw.get(key), list):

@@ -27,13 +27,13 @@ from numbers import Real
 
 import numpy as np
 
-from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_box, check_dt,
-                    read_scene_toml)
+from .scene import (BOUNDARIES, DEFAULT_BOX, MASS_MODELS, PRECISIONS, SCHEMES, Scene, _choice, check_box,
+                    check_dt, read_scene_toml)
 
 #: The table name of one circle in a scene file: ``[[circle]]``.
 CIRCLE_KEY = "circle"
 #: Top-level keys of a random scene that make no sense when the circles are listed.
-RANDOM_SCENE_KEYS = ("n", "radius", "speed", "seed")
+RANDOM_SCENE_KEYS = ("n", "radius", "speed", "seed", "area_fraction")
 #: Top-level keys a file with ``[[circle]]`` entries may hold (``[run]`` is taken off before).
 TOP_LEVEL_KEYS = (CIRCLE_KEY, "box", "boundary", "scheme", "precision", "dt", "mass")
 CIRCLE_KEYS = ("pos", "vel", "radius", "mass", "color")
@@ -117,7 +117,7 @@ def circle_list_from_dict(data: dict) -> CircleList:
     if not isinstance(entries, list) or not entries:
         raise ValueError(f"circle = {entries!r} must be a non-empty array of tables: give each "
                          "circle as a [[circle]] table with pos, vel and radius")
-    box = check_box(data.get("box", Scene.box))
+    box = check_box(data.get("box", DEFAULT_BOX))
     boundary = _choice("boundary", data.get("boundary", Scene.boundary), BOUNDARIES)
     scheme = _choice("scheme", data.get("scheme", Scene.scheme), SCHEMES)
     precision = _choice("precision", data.get("precision", Scene.precision), PRECISIONS)

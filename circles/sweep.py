@@ -1,0 +1,711 @@
+"""Sweeps: many scenes, each run and measured as a task on Dask's distributed scheduler.
+
+A sweep file (TOML) holds a base scene, the fields to vary and how to measure::
+
+    [scene]                  # the base scene: Scene's fields (box or area_fraction)
+    n = 400
+    radius = 0.05
+    mass = "equal"
+    boundary = "periodic"
+    seed = 1
+
+    [vary]                   # lists of values; every combination is a point
+    area_fraction = [0.1, 0.3, 0.5]
+
+    [sweep]                  # how each point is measured (defaults in SWEEP_DEFAULTS)
+    repeats = 2              # runs per point, each with its own seed
+    equilibrate = 2.0        # simulated time before measuring
+    measure = 10.0           # simulated time measured, in `blocks` equal blocks
+    blocks = 10
+    observables = ["compressibility", "collision_rate", "energy_change"]
+
+Each (point, repeat) is a task. Repeat r runs with the seed `repeat_seed(base seed, r)`,
+the same at every point, so that the numbers of a point depend on nothing but the file.
+Every observable is measured over each block (`circles.observables.interval`), and a
+point's value is the mean over all blocks of all its repeats, with its standard error (the
+spread of those block values over the square root of their count).
+
+`run_sweep` streams a row per point into ``DIR/results.csv`` as the point's last task ends,
+skips the points the file holds already, and draws a plot per observable (`plot_sweep`).
+Tasks are independent and their results are put together in repeat order, so the numbers
+are the same whatever the number of workers or the order in which tasks finish.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import sys
+import threading
+import time
+import tomllib
+import uuid
+from dataclasses import dataclass, field, fields
+from numbers import Integral, Real
+
+#: The observables a sweep may keep. Each is measured per block; energy_change is the change
+#: of the kinetic energy over a block relative to the energy at the start of the run.
+OBSERVABLES = ("compressibility", "collision_rate", "energy_change", "pressure", "wall_pressure", "temperature")
+DEFAULT_OBSERVABLES = ("compressibility", "collision_rate", "energy_change")
+
+#: The [sweep] table's keys and their defaults.
+SWEEP_DEFAULTS = {"repeats": 1, "equilibrate": 1.0, "measure": 10.0, "blocks": 10,
+                  "observables": list(DEFAULT_OBSERVABLES)}
+#: Limits: repeats and blocks at most; tasks (points times repeats) at most; durations at most.
+MOST_REPEATS = 1000
+MOST_BLOCKS = 10_000
+MOST_TASKS = 100_000
+MOST_DURATION = 1e12
+#: The top-level tables of a sweep file.
+TABLES = ("scene", "vary", "sweep")
+#: The name of the results file in the output folder, and of the file that fixes the sweep it
+#: belongs to (a rerun with another base scene or [sweep] table is refused).
+RESULTS = "results.csv"
+IDENTITY = "sweep.json"
+
+
+class SweepError(ValueError):
+    """A sweep file or option that is refused: one line that names the key."""
+
+
+# ---- the sweep file -----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Sweep:
+    """A checked sweep: the base scene's fields, the varied fields with their values, and the
+    measurement. `points` lists each point's values of the varied fields, in the order of
+    `itertools.product` over the [vary] table."""
+
+    scene: dict
+    vary: dict
+    repeats: int
+    equilibrate: float
+    measure: float
+    blocks: int
+    observables: tuple
+    points: list = field(default_factory=list)
+    source: str = ""
+
+    @property
+    def varied(self):
+        return tuple(self.vary)
+
+    def point_scene(self, index, repeat):
+        """The Scene fields of a point's repeat (its values over the base, its repeat's seed)."""
+        return scene_fields(self.scene, self.points[index], repeat_seed(self.scene.get("seed", 0), repeat))
+
+    def identity(self) -> dict:
+        """What fixes the meaning of a row: the base scene, the names of the varied fields and
+        the measurement (not the values varied: a sweep may be extended)."""
+        return {"scene": self.scene, "varied": list(self.varied), "repeats": self.repeats,
+                "equilibrate": self.equilibrate, "measure": self.measure, "blocks": self.blocks,
+                "observables": list(self.observables)}
+
+
+def repeat_seed(base_seed, repeat):
+    """The seed of repeat `repeat`: drawn from numpy's SeedSequence of (base seed, repeat), so
+    that repeats are independent streams and repeat 0 is not the base seed's own stream."""
+    import numpy as np
+
+    return int(np.random.SeedSequence([int(base_seed), int(repeat)]).generate_state(1, dtype=np.uint32)[0])
+
+
+def scene_fields(base, values, seed):
+    """The base scene's fields with a point's values put in: a box given takes the place of the
+    base's area_fraction, and an area_fraction that of its box."""
+    merged = dict(base)
+    if "box" in values:
+        merged.pop("area_fraction", None)
+    if "area_fraction" in values:
+        merged.pop("box", None)
+    merged.update(values)
+    merged["seed"] = seed
+    return merged
+
+
+def read_sweep(path) -> Sweep:
+    """Read and check a sweep file; a SweepError of one line naming the file and the key when
+    anything is refused (every point's scene is made, so a value Scene refuses is caught here,
+    before any task)."""
+    try:
+        with open(path, "rb") as file:
+            data = tomllib.load(file)
+    except FileNotFoundError:
+        raise SweepError(f"sweep file {path} not found") from None
+    except IsADirectoryError:
+        raise SweepError(f"sweep file {path} is a folder: give a .toml file") from None
+    except UnicodeDecodeError as error:
+        raise SweepError(f"{path}: not UTF-8 text (byte {error.object[error.start]:#04x} at offset "
+                         f"{error.start}): save the sweep file as UTF-8") from None
+    except OSError as error:
+        raise SweepError(f"cannot read sweep file {path}: {error.strerror}") from None
+    except tomllib.TOMLDecodeError as error:
+        raise SweepError(f"{path}: not valid TOML ({error})") from None
+    try:
+        return sweep_from_dict(data, source=str(path))
+    except ValueError as error:
+        raise SweepError(f"{path}: {error}") from None
+
+
+def _table(data, name, required):
+    if name not in data:
+        if required:
+            raise ValueError(f"[{name}] is missing: {_HINTS[name]}")
+        return {}
+    table = data[name]
+    if not isinstance(table, dict):
+        raise ValueError(f"{name} = {table!r} must be a table [{name}]: {_HINTS[name]}")
+    return table
+
+
+_HINTS = {
+    "scene": "give the base scene's fields in a [scene] table (n, radius, box or area_fraction, ...)",
+    "vary": "give the fields to vary as lists in a [vary] table, e.g. area_fraction = [0.1, 0.3]",
+    "sweep": "give repeats, equilibrate, measure, blocks and observables in a [sweep] table",
+}
+
+
+def _whole(key, value, least, most):
+    if isinstance(value, bool) or not isinstance(value, Integral) or not least <= value <= most:
+        raise ValueError(f"[sweep] {key} = {value!r} must be a whole number from {least} to {most}")
+    return int(value)
+
+
+def _duration(key, value, least_exclusive):
+    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value):
+        raise ValueError(f"[sweep] {key} = {value!r} must be a finite number of simulated seconds")
+    if (value <= 0 if least_exclusive else value < 0) or value > MOST_DURATION:
+        bound = "> 0" if least_exclusive else ">= 0"
+        raise ValueError(f"[sweep] {key} = {value!r} is out of range: give simulated seconds {bound} and at most "
+                         f"{MOST_DURATION:g}")
+    return float(value)
+
+
+def sweep_from_dict(data: dict, source="") -> Sweep:
+    """Check the contents of a sweep file (see the module's docstring) and return the Sweep."""
+    from .scene import Scene
+
+    unknown = sorted(set(data) - set(TABLES))
+    if unknown:
+        raise ValueError(f"unknown key(s) {', '.join(unknown)}: a sweep file has the tables "
+                         f"{', '.join(f'[{t}]' for t in TABLES)}")
+    scene = dict(_table(data, "scene", True))
+    vary = _table(data, "vary", True)
+    settings = _table(data, "sweep", False)
+    if "circle" in scene:
+        raise ValueError("[scene] lists its circles ([[scene.circle]]): a sweep varies random scenes; give n, "
+                         "radius and the other Scene fields instead")
+    known = [f.name for f in fields(Scene)]
+    unknown = sorted(set(scene) - set(known))
+    if unknown:
+        raise ValueError(f"[scene] unknown key(s) {', '.join(unknown)}: known keys are {', '.join(known)}")
+    if "box" in scene and "area_fraction" in scene:
+        raise ValueError("[scene] box and area_fraction are both given: give one of them")
+    if not vary:
+        raise ValueError(f"[vary] is empty: {_HINTS['vary']}")
+    for key, values in vary.items():
+        if key == "seed":
+            raise ValueError("[vary] seed cannot be varied: each repeat has its own seed; set [sweep] repeats")
+        if key not in known:
+            raise ValueError(f"[vary] unknown key {key}: vary one of the Scene fields "
+                             f"{', '.join(k for k in known if k != 'seed')}")
+        if not isinstance(values, list) or not values:
+            raise ValueError(f"[vary] {key} = {values!r} must be a non-empty list of values, e.g. {key} = [a, b]")
+        keys = [json.dumps(v, sort_keys=True) for v in values]
+        if len(set(keys)) < len(keys):
+            twice = next(v for v, k in zip(values, keys) if keys.count(k) > 1)
+            raise ValueError(f"[vary] {key} lists {twice!r} twice: give each value once")
+    if "box" in vary and "area_fraction" in vary:
+        raise ValueError("[vary] box and area_fraction are both varied: vary one of them")
+    unknown = sorted(set(settings) - set(SWEEP_DEFAULTS))
+    if unknown:
+        raise ValueError(f"[sweep] unknown key(s) {', '.join(unknown)}: known keys are {', '.join(SWEEP_DEFAULTS)}")
+    s = {**SWEEP_DEFAULTS, **settings}
+    repeats = _whole("repeats", s["repeats"], 1, MOST_REPEATS)
+    blocks = _whole("blocks", s["blocks"], 1, MOST_BLOCKS)
+    equilibrate = _duration("equilibrate", s["equilibrate"], False)
+    measure = _duration("measure", s["measure"], True)
+    observables = s["observables"]
+    if not isinstance(observables, list) or not observables or not all(isinstance(o, str) for o in observables):
+        raise ValueError(f"[sweep] observables = {observables!r} must be a non-empty list of names from "
+                         f"{', '.join(OBSERVABLES)}")
+    for name in observables:
+        if name not in OBSERVABLES:
+            raise ValueError(f"[sweep] observables: {name!r} is unknown: use names from {', '.join(OBSERVABLES)}")
+    if len(set(observables)) < len(observables):
+        raise ValueError(f"[sweep] observables = {observables!r} names one twice: give each once")
+    count = math.prod(len(v) for v in vary.values())
+    if count * repeats > MOST_TASKS:
+        raise ValueError(f"[vary] and [sweep] repeats make {count} points x {repeats} repeats = {count * repeats} "
+                         f"tasks, more than {MOST_TASKS}: split the sweep")
+    points = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
+    sweep = Sweep(scene=scene, vary=dict(vary), repeats=repeats, equilibrate=equilibrate, measure=measure,
+                  blocks=blocks, observables=tuple(observables), points=points, source=source)
+    base_seed = scene.get("seed", 0)
+    from .scene import check_count
+    check_count("[scene] seed", base_seed)
+    for index, values in enumerate(points):
+        try:
+            made = Scene.from_dict(sweep.point_scene(index, 0))
+        except (ValueError, TypeError) as error:
+            where = ", ".join(f"{k} = {json.dumps(v)}" for k, v in values.items())
+            raise ValueError(f"the point {where}: {error}") from None
+        if "wall_pressure" in observables and made.boundary == "periodic":
+            raise ValueError("[sweep] observables: wall_pressure needs walls, and the point's boundary is "
+                             "periodic: drop wall_pressure or use boundary = \"walls\"")
+        steps = (equilibrate + measure) / _step_of(made)
+        if steps > 1e10:
+            raise ValueError(f"[sweep] equilibrate + measure = {equilibrate + measure:g} s is {steps:.3g} steps of "
+                             "the point's scene, more than 1e10: shorten them or give [scene] a longer dt")
+    return sweep
+
+
+def _step_of(scene):
+    """The scene's step: its dt, or the step the simulation would choose (a bound from below
+    is enough here: the radii over the largest speed, as the default dt is made)."""
+    if scene.dt is not None:
+        return scene.dt
+    vmax = scene.speed[1]
+    return scene.radius[0] / vmax if vmax > 0 else math.inf
+
+
+# ---- one task -----------------------------------------------------------------------------
+
+_runtime_lock = threading.Lock()
+
+
+def _ensure_runtime(threads):
+    """Start Taichi on the CPU in this process once, with `threads` threads (None: the Dask
+    worker's own thread count, or every core outside a worker). A process that already
+    started it (the serial run in the caller's process) keeps its runtime."""
+    from . import backend
+
+    if backend._state["initialized"]:
+        return
+    if threads is None:
+        try:
+            from distributed import get_worker
+            threads = get_worker().state.nthreads
+        except (ImportError, ValueError):
+            threads = os.cpu_count() or 1
+    backend.init("cpu", cpu_max_num_threads=max(1, int(threads)))
+
+
+def run_task(scene_fields_, equilibrate, measure, blocks, threads=None):
+    """Run one (point, repeat): equilibrate, then measure every observable over each of
+    `blocks` equal blocks of `measure` simulated seconds. Returns {"blocks": {observable:
+    [values]}, "pair_collisions", "seconds", "pid"}. Tasks in one process take turns (the
+    Taichi runtime is the process's)."""
+    from .observables import interval
+    from .scene import Scene
+
+    with _runtime_lock:
+        _ensure_runtime(threads)
+        from .simulation import Simulation
+
+        started = time.perf_counter()
+        scene = Scene.from_dict(scene_fields_)
+        sim = Simulation(scene)
+        first = sim.stats()
+        energy_0 = first["kinetic_energy"]
+        if equilibrate > 0:
+            sim.advance(equilibrate)
+        before = sim.stats()
+        start = before
+        radius = 0.5 * (scene.radius[0] + scene.radius[1])
+        values = {name: [] for name in OBSERVABLES}
+        for k in range(blocks):
+            sim.advance(equilibrate + measure * (k + 1) / blocks - sim.time)
+            after = sim.stats()
+            row = interval(before, after, scene.n, scene.box, scene.boundary, radius)
+            for name in ("compressibility", "collision_rate", "pressure", "wall_pressure", "temperature"):
+                values[name].append(row[name])
+            values["energy_change"].append((after["kinetic_energy"] - before["kinetic_energy"]) / energy_0
+                                           if energy_0 > 0 else 0.0)
+            before = after
+        return {"blocks": values, "pair_collisions": before["pair_collisions"] - start["pair_collisions"],
+                "seconds": time.perf_counter() - started, "pid": os.getpid()}
+
+
+def point_row(sweep, index, results):
+    """A point's row of results.csv from its tasks' results, given in repeat order: for each
+    kept observable its mean over all blocks of all repeats and the standard error."""
+    import numpy as np
+
+    row = {key: json.dumps(value) for key, value in sweep.points[index].items()}
+    row["repeats"] = sweep.repeats
+    row["blocks"] = sweep.blocks
+    names = list(sweep.observables) + (["temperature"] if "temperature" not in sweep.observables else [])
+    for name in names:
+        samples = np.concatenate([np.asarray(r["blocks"][name], dtype=np.float64) for r in results])
+        mean = float(np.mean(samples))
+        se = float(np.std(samples, ddof=1) / math.sqrt(samples.size)) if samples.size > 1 else math.nan
+        row[name] = repr(mean)
+        row[f"{name}_se"] = repr(se)
+    row["pair_collisions"] = sum(int(r["pair_collisions"]) for r in results)
+    row["task_seconds"] = f"{sum(r['seconds'] for r in results):.3f}"
+    return row
+
+
+def columns(sweep):
+    """The columns of results.csv: the varied fields, repeats and blocks, each observable and
+    its standard error (the temperature always), the pair collisions measured, the tasks'
+    seconds."""
+    names = list(sweep.observables) + (["temperature"] if "temperature" not in sweep.observables else [])
+    return [*sweep.varied, "repeats", "blocks", *[c for n in names for c in (n, f"{n}_se")], "pair_collisions",
+            "task_seconds"]
+
+
+# ---- results.csv ------------------------------------------------------------------------
+
+def _fingerprint(sweep):
+    return hashlib.sha256(json.dumps(sweep.identity(), sort_keys=True).encode()).hexdigest()
+
+
+def _point_key(values):
+    return tuple(json.dumps(v, sort_keys=True) for v in values)
+
+
+def read_results(out, sweep):
+    """{point key: row} of the points DIR/results.csv holds (a last line cut short by a stop
+    is dropped, and cut off the file). Refused when the folder holds another sweep's results."""
+    results = os.path.join(out, RESULTS)
+    identity = os.path.join(out, IDENTITY)
+    if os.path.exists(identity):
+        with open(identity) as file:
+            try:
+                held = json.load(file)
+            except json.JSONDecodeError:
+                held = None
+        if held != {"fingerprint": _fingerprint(sweep), **sweep.identity()}:
+            raise SweepError(f"{out} holds the results of another sweep (its [scene], varied fields or [sweep] "
+                             f"differ from {sweep.source or 'this one'}'s): give another --out, or remove {out}")
+    elif os.path.exists(results):
+        raise SweepError(f"{results} exists without {IDENTITY}: give another --out, or remove {results}")
+    if not os.path.exists(results):
+        return {}
+    with open(results, "rb+") as file:
+        data = file.read()
+        if data and not data.endswith(b"\n"):
+            keep = data.rfind(b"\n") + 1
+            file.truncate(keep)
+            data = data[:keep]
+    lines = data.decode().splitlines()
+    rows = list(csv.DictReader(lines))
+    if lines and next(csv.reader(lines[:1])) != columns(sweep):
+        raise SweepError(f"{results} has other columns than this sweep writes: give another --out, or remove it")
+    return {tuple(row[k] for k in sweep.varied): row for row in rows}
+
+
+class _ResultsFile:
+    """DIR/results.csv, a row appended and flushed to disk per finished point."""
+
+    def __init__(self, out, sweep):
+        os.makedirs(out, exist_ok=True)
+        with open(os.path.join(out, IDENTITY), "w") as file:
+            json.dump({"fingerprint": _fingerprint(sweep), **sweep.identity()}, file, indent=1)
+        self.path = os.path.join(out, RESULTS)
+        self.columns = columns(sweep)
+        new = not os.path.exists(self.path) or os.path.getsize(self.path) == 0
+        self.file = open(self.path, "a", newline="")
+        self.writer = csv.DictWriter(self.file, self.columns, lineterminator="\n")
+        if new:
+            self.writer.writeheader()
+            self._sync()
+
+    def write(self, row):
+        self.writer.writerow(row)
+        self._sync()
+
+    def _sync(self):
+        self.file.flush()
+        os.fsync(self.file.fileno())
+
+    def close(self):
+        self.file.close()
+
+
+# ---- running ------------------------------------------------------------------------------
+
+@dataclass
+class SweepRun:
+    """What a run of a sweep did: the points run and skipped (indices), the rows written, the
+    tasks' results by (point, repeat), and the wall time."""
+
+    ran: list
+    skipped: list
+    rows: list
+    results: dict
+    wall_s: float
+
+
+def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None):
+    """Run the points of `sweep` that DIR/results.csv does not hold yet, a task per (point,
+    repeat): on the Dask `client` (each task's key ends in -POINT-REPEAT) (distributed.Client) when given, else one by one in this
+    process. A row is appended to DIR/results.csv when a point's last task ends; `on_row(row)`
+    and `on_result((point, repeat), result)` are called as they come. `threads`: Taichi's
+    threads in each worker process (None: the worker's own thread count)."""
+    started = time.perf_counter()
+    done = read_results(out, sweep)
+    todo = [i for i, values in enumerate(sweep.points) if _point_key(values.values()) not in done]
+    skipped = [i for i in range(len(sweep.points)) if i not in set(todo)]
+    tasks = [(p, r) for p in todo for r in range(sweep.repeats)]
+    file = _ResultsFile(out, sweep)
+    results, rows = {}, []
+    left = {p: sweep.repeats for p in todo}
+
+    def finished(task, result):
+        results[task] = result
+        if on_result is not None:
+            on_result(task, result)
+        point = task[0]
+        left[point] -= 1
+        if left[point] == 0:
+            row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
+            file.write(row)
+            rows.append(row)
+            if on_row is not None:
+                on_row(row)
+
+    def args(task):
+        return (sweep.point_scene(*task), sweep.equilibrate, sweep.measure, sweep.blocks, threads)
+
+    try:
+        if client is None:
+            for task in tasks:
+                finished(task, run_task(*args(task)))
+        else:
+            from distributed import as_completed
+
+            # A key of this run's own: keys of a stopped run may still be held, cancelled, by the scheduler.
+            tag = f"{_fingerprint(sweep)[:12]}-{uuid.uuid4().hex[:8]}"
+            futures = {client.submit(run_task, *args(task), key=f"circles-sweep-{tag}-{task[0]}-{task[1]}",
+                                     pure=False): task for task in tasks}
+            try:
+                for future in as_completed(futures):
+                    finished(futures[future], future.result())
+            finally:
+                for future in futures:
+                    future.cancel()
+    finally:
+        file.close()
+    return SweepRun(ran=todo, skipped=skipped, rows=rows, results=results, wall_s=time.perf_counter() - started)
+
+
+def local_cluster(workers, threads_per_worker=1):
+    """A Dask LocalCluster of `workers` worker processes on this machine, quiet, its dashboard on
+    a free port (two sweeps at once do not meet on one)."""
+    import logging
+
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
+                        dashboard_address=":0", silence_logs=logging.ERROR)
+
+
+# ---- plots --------------------------------------------------------------------------------
+
+LABELS = {"compressibility": "compressibility Z = PA / NkT", "collision_rate": "collisions per circle per unit time",
+          "energy_change": "relative energy change per block", "pressure": "pressure (virial)",
+          "wall_pressure": "pressure on the walls", "temperature": "kT"}
+
+
+def load_rows(out, sweep):
+    """The rows of DIR/results.csv for the points of `sweep`, in the sweep's point order."""
+    held = read_results(out, sweep)
+    rows = []
+    for values in sweep.points:
+        row = held.get(_point_key(values.values()))
+        if row is not None:
+            rows.append((values, row))
+    return rows
+
+
+def theory(sweep, values, row):
+    """{observable: value} of hard-disk theory at a point, for points of equal disks in a
+    periodic box with a known area fraction: Liu's Z and Enskog's collision rate. Empty else."""
+    from .scene import Scene
+    from .theory import enskog_rate, liu_z
+
+    scene = Scene.from_dict(scene_fields(sweep.scene, values, 0))
+    r0, r1 = scene.radius
+    if r0 != r1 or scene.boundary != "periodic" or "area_fraction" not in sweep.vary:
+        return {}
+    eta, r = scene.area_fraction, r0
+    mass = {"equal": 1.0, "radius": r, "area": math.pi * r * r}[scene.mass]
+    kT = float(row["temperature"])
+    rho = scene.n / (scene.box[0] * scene.box[1])
+    return {"compressibility": liu_z(eta), "collision_rate": enskog_rate(eta, rho, 2 * r, kT, mass)}
+
+
+def deviations(sweep, rows, name="compressibility"):
+    """[(area fraction, measured, theory, relative deviation, deviation in standard errors)]
+    of an observable against theory (`theory`), point by point."""
+    out = []
+    for values, row in rows:
+        expect = theory(sweep, values, row).get(name)
+        if expect is None or name not in row:
+            continue
+        got, se = float(row[name]), float(row[f"{name}_se"])
+        out.append((float(values["area_fraction"]), got, expect, got / expect - 1.0,
+                    (got - expect) / se if se > 0 else math.nan))
+    return out
+
+
+def plot_sweep(sweep, out):
+    """A PNG per kept observable against the first varied field (a line per combination of the
+    others), with error bars of one standard error, and Liu's Z and Enskog's collision rate
+    beside them when the sweep varies the area fraction of equal disks in a periodic box.
+    Returns the paths written; raises ImportError without matplotlib."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = load_rows(out, sweep)
+    x_key, others = sweep.varied[0], sweep.varied[1:]
+    paths = []
+    for name in sweep.observables:
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+        groups = {}
+        for values, row in rows:
+            groups.setdefault(tuple(json.dumps(values[k]) for k in others), []).append((values, row))
+        for group, members in groups.items():
+            x = [_number_of(v[x_key]) for v, _ in members]
+            y = [float(r[name]) for _, r in members]
+            e = [float(r[f"{name}_se"]) for _, r in members]
+            label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
+            ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
+            values, row = members[0]
+            if theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
+                # A smooth curve through the points' range, at the first point's temperature.
+                grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]
+                curve = [theory(sweep, {**values, x_key: g}, row)[name] for g in grid]
+                theory_name = {"compressibility": "Liu", "collision_rate": "Enskog (Liu's g)"}[name]
+                ax.plot(grid, curve, "-", color="0.3", lw=1, label=theory_name)
+        ax.set_xlabel(x_key)
+        ax.set_ylabel(LABELS[name])
+        if name == "compressibility" and x_key == "area_fraction":
+            ax.set_yscale("log")
+        ax.set_title(os.path.basename(sweep.source) or "sweep", fontsize=10)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = os.path.join(out, f"{name}.png")
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def _number_of(value):
+    if isinstance(value, list):
+        return value[0] if len(value) else math.nan
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return value
+    return str(value)
+
+
+# ---- the command line ---------------------------------------------------------------------
+
+def add_sweep_command(commands):
+    """The `circles sweep` subcommand, on the command line's subparsers."""
+    sweep = commands.add_parser(
+        "sweep", help="run many scenes on Dask and measure each",
+        description="Run every point of a sweep file (a base scene and the fields to vary) as tasks on Dask, "
+                    "a row per point in DIR/results.csv and a plot per observable. Points already in "
+                    "DIR/results.csv are skipped.")
+    sweep.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: [scene], [vary] and [sweep] tables")
+    where = sweep.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="worker processes of the local cluster (default: one per core; 0 runs the tasks "
+                            "one by one in this process, without Dask)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="the address of a running Dask scheduler (tcp://host:8786) to use instead")
+    sweep.add_argument("--out", metavar="DIR", help="folder for results.csv and the plots (default "
+                                                    "outputs/SWEEP, after the file's name)")
+
+
+def main(argv):
+    """`circles sweep ...`: the exit status (0 done, 2 bad input, 1 failed, 130 Ctrl-C)."""
+    from .cli import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, UsageError, _build_parser
+
+    try:
+        args = _build_parser().parse_args(argv)
+        sweep = read_sweep(args.sweep)
+        if args.workers is not None and not 0 <= args.workers <= 4096:
+            raise SweepError(f"--workers {args.workers} must be from 0 (no Dask: this process) to 4096")
+        out = args.out or os.path.join("outputs", os.path.splitext(os.path.basename(args.sweep))[0])
+        if os.path.exists(out) and not os.path.isdir(out):
+            raise SweepError(f"--out {out} is a file: give a folder")
+        read_results(out, sweep)  # another sweep's results are refused before any task
+        if args.workers != 0:
+            try:
+                import distributed  # noqa: F401
+            except ImportError:
+                raise SweepError("circles sweep runs its tasks on Dask, which is not installed: pip install "
+                                 "'circles[sweep]', or give --workers 0 to run them one by one here") from None
+    except (UsageError, SweepError) as error:
+        print(f"circles: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SystemExit as exit_:  # --help
+        return exit_.code if isinstance(exit_.code, int) else 0
+    cluster = client = None
+    try:
+        total = len(sweep.points)
+        cores = os.cpu_count() or 1
+        threads = None
+        if args.scheduler:
+            from distributed import Client
+            client = Client(args.scheduler, timeout="30s")
+            where = f"the Dask scheduler at {args.scheduler}"
+        elif args.workers == 0:
+            where = "this process, task by task"
+        else:
+            workers = args.workers or cores
+            threads = max(1, cores // workers)
+            cluster = local_cluster(workers)
+            from distributed import Client
+            client = Client(cluster)
+            where = f"a local cluster of {workers} worker process{'es' if workers > 1 else ''}, " \
+                    f"{threads} thread{'s' if threads > 1 else ''} each"
+        print(f"sweep       {total} points x {sweep.repeats} repeats on {where}", flush=True)
+        from .kernel_cache import announce
+        from .scene import Scene
+        announce(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", threads or 0, stream=sys.stdout)
+        count = [0]
+
+        def on_row(row):
+            count[0] += 1
+            shown = ", ".join(f"{k} {row[k]}" for k in sweep.varied)
+            print(f"point       {shown}: " + ", ".join(f"{n} {float(row[n]):.4g} +- {float(row[n + '_se']):.2g}"
+                                                     for n in sweep.observables), flush=True)
+
+        run = run_sweep(sweep, out, client=client, threads=threads, on_row=on_row)
+        print(f"done        {len(run.ran)} points run, {len(run.skipped)} already in {os.path.join(out, RESULTS)}, "
+              f"{run.wall_s:.1f} s", flush=True)
+        try:
+            paths = plot_sweep(sweep, out)
+            print(f"plots       {', '.join(paths)}")
+        except ImportError:
+            print("plots       skipped: matplotlib is not installed (pip install 'circles[plot]')")
+        worst = max(deviations(sweep, load_rows(out, sweep)), key=lambda d: abs(d[3]), default=None)
+        if worst is not None:
+            print(f"liu         largest deviation of Z from Liu's: {100 * worst[3]:+.2f}% ({worst[4]:+.1f} standard "
+                  f"errors) at area fraction {worst[0]:g}")
+        return 0
+    except KeyboardInterrupt:
+        print("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun runs the others",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler
+        print(f"circles: the sweep failed: {type(error).__name__}: {error}; the points done are in "
+              f"{os.path.join(out, RESULTS)}", file=sys.stderr)
+        return EXIT_FAILED
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()

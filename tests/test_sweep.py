@@ -1,0 +1,217 @@
+"""Sweeps on a real Dask LocalCluster of two worker processes: the same numbers as a serial run,
+whatever the order tasks finish in, when a worker process dies, and when a stopped sweep is
+run again; bad sweep files refused before any task.
+
+The worker processes start Taichi themselves and share the offline cache of this process
+(TI_OFFLINE_CACHE_FILE_PATH in the environment they inherit).
+"""
+
+import csv
+import json
+import os
+import signal
+import textwrap
+
+import pytest
+
+from circles import sweep as sweeps
+
+distributed = pytest.importorskip("distributed")
+
+#: Tens of circles, a short run: a task takes a fraction of a second once the kernels are built.
+TINY = """
+[scene]
+n = 40
+radius = 0.05
+speed = [1.0, 1.0]
+mass = "equal"
+boundary = "periodic"
+seed = 3
+
+[vary]
+area_fraction = [0.1, 0.3, 0.5]
+
+[sweep]
+repeats = 2
+equilibrate = 0.5
+measure = 2.0
+blocks = 4
+observables = ["compressibility", "collision_rate", "energy_change"]
+"""
+
+#: The columns that depend on the simulation only (not task_seconds, a timing).
+NUMBERS = [c for c in ("area_fraction", "repeats", "blocks", "compressibility", "compressibility_se",
+                       "collision_rate", "collision_rate_se", "energy_change", "energy_change_se",
+                       "temperature", "temperature_se", "pair_collisions")]
+
+
+def write(tmp_path, text, name="sweep.toml"):
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def table(out):
+    """{area_fraction: the row's numbers, as written} of out/results.csv."""
+    with open(out / "results.csv", newline="") as file:
+        return {row["area_fraction"]: [row[c] for c in NUMBERS] for row in csv.DictReader(file)}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    cluster = sweeps.local_cluster(2)
+    client = distributed.Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def serial(circles_cpu, tmp_path_factory):
+    """The tiny sweep run task by task in this process: (sweep, its results folder)."""
+    tmp = tmp_path_factory.mktemp("serial")
+    sweep = sweeps.read_sweep(write(tmp, TINY))
+    sweeps.run_sweep(sweep, tmp / "out")
+    return sweep, tmp / "out"
+
+
+def test_serial_sweep_measures_the_hard_disk_fluid(serial):
+    """Z within 5 standard errors (and 10%) of Liu's; energy kept to round-off; every point once."""
+    sweep, out = serial
+    rows = table(out)
+    assert sorted(rows) == ["0.1", "0.3", "0.5"]
+    for phi, got, expect, rel, z in sweeps.deviations(sweep, sweeps.load_rows(out, sweep)):
+        assert abs(rel) < 0.10 and abs(z) < 5, (phi, got, expect)
+    for row in rows.values():
+        assert abs(float(row[NUMBERS.index("energy_change")])) < 1e-13
+
+
+def test_local_cluster_gives_the_serial_numbers(serial, cluster, tmp_path):
+    sweep, serial_out = serial
+    run = sweeps.run_sweep(sweep, tmp_path / "out", client=cluster, threads=1)
+    assert run.ran == [0, 1, 2] and run.skipped == []
+    assert {r["pid"] for r in run.results.values()} <= set(cluster.run(os.getpid).values())
+    assert table(tmp_path / "out") == table(serial_out)
+
+
+def test_a_stopped_sweep_run_again_runs_only_the_missing_points(serial, cluster, tmp_path):
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+
+    def stop(row):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(sweep, out, client=cluster, threads=1, on_row=stop)
+    first = table(out)
+    assert len(first) == 1
+    # A stop while a row was written leaves part of a line: it is dropped, and its point run again.
+    with open(out / "results.csv", "a") as file:
+        file.write("0.7,2,4,1.5")
+    run = sweeps.run_sweep(sweep, out, client=cluster, threads=1)
+    done = sorted(json.dumps(sweep.points[i]["area_fraction"]) for i in run.ran)
+    assert done == sorted(set(table(serial_out)) - set(first))
+    assert len(run.results) == 2 * sweep.repeats
+    assert table(out) == table(serial_out)
+    again = sweeps.run_sweep(sweep, out, client=cluster, threads=1)
+    assert again.ran == [] and again.results == {}
+
+
+def test_a_worker_killed_mid_sweep_loses_no_point(serial, cluster, tmp_path):
+    """The worker busy with a task is killed after the first task ends; the nanny starts a
+    new one and the scheduler gives its task to a live worker: every point completes, with the
+    serial numbers. Tasks are made long enough (a second or so) to be caught running."""
+    sweep, _ = serial
+    text = TINY.replace("measure = 2.0", "measure = 60.0").replace("blocks = 4", "blocks = 3")
+    longer = sweeps.read_sweep(write(tmp_path, text))
+    killed = {}
+
+    def kill(task, result):
+        if killed:
+            return
+        pids = cluster.run(os.getpid)
+        busy = [address for address, keys in cluster.processing().items() if keys]
+        victim = busy[0]
+        killed.update(pid=pids[victim], keys=set(cluster.processing()[victim]))
+        os.kill(pids[victim], signal.SIGKILL)
+
+    run = sweeps.run_sweep(longer, tmp_path / "out", client=cluster, threads=1, on_result=kill)
+    assert killed["keys"], "no task was running on the killed worker"
+    assert len(run.rows) == 3 and len(run.results) == 3 * longer.repeats
+    lost = [tuple(int(i) for i in key.rsplit("-", 2)[1:]) for key in killed["keys"]]
+    assert lost and all(run.results[t]["pid"] != killed["pid"] for t in lost)
+    serial_out = tmp_path / "serial"
+    sweeps.run_sweep(longer, serial_out)
+    assert table(tmp_path / "out") == table(serial_out)
+
+
+# ---- bad sweep files ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("change, words", [
+    (("[vary]\n", "[vary]\ncolour = [1, 2]\n"), ["[vary]", "colour"]),
+    (("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = []"), ["[vary]", "area_fraction", "non-empty"]),
+    (("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.1, 0.95]"), ["area_fraction", "0.95"]),
+    (("radius = 0.05", "radius = -0.05"), ["radius", "-0.05"]),
+    (("repeats = 2", "repeats = 0"), ["repeats", "0"]),
+    (("measure = 2.0", "measure = nan"), ["measure", "nan"]),
+    (("blocks = 4", "blocks = 4\nwarmup = 3"), ["[sweep]", "warmup"]),
+    (('"energy_change"]', '"entropy"]'), ["observables", "entropy"]),
+    (("[vary]\n", "[vary]\nseed = [1, 2]\n"), ["seed", "repeats"]),
+    (("n = 40", "n = 40\nbox = [2.0, 2.0]\narea_fraction = 0.2"), ["box", "area_fraction"]),
+], ids=["unknown-field", "empty-list", "scene-refuses", "base-refused", "repeats", "nan", "sweep-key",
+        "observable", "seed", "box-and-fraction"])
+def test_bad_sweep_files_are_refused_before_any_task(tmp_path, capsys, change, words):
+    old, new = change
+    assert old in TINY
+    path = write(tmp_path, TINY.replace(old, new, 1))
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and captured.out == "", captured.err
+    assert lines[0].startswith("circles: error: ") and str(path) in lines[0]
+    for word in words:
+        assert word in lines[0]
+    assert not out.exists()
+
+
+def test_a_folder_with_another_sweeps_results_is_refused(serial, tmp_path, capsys):
+    sweep, out = serial
+    other = write(tmp_path, TINY.replace("measure = 2.0", "measure = 3.0"))
+    assert sweeps.main(["sweep", str(other), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "another sweep" in err and str(out) in err and len(err.strip().splitlines()) == 1
+
+
+def test_repeat_seeds_are_distinct_and_fixed_by_the_base_seed():
+    seeds = [sweeps.repeat_seed(3, r) for r in range(100)]
+    assert len(set(seeds)) == 100 and seeds == [sweeps.repeat_seed(3, r) for r in range(100)]
+    assert sweeps.repeat_seed(4, 0) not in seeds
+
+
+def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys):
+    """`circles sweep` end to end: its own cluster of two workers, the serial numbers, a plot per
+    observable, and Liu's deviation said; run again, every point is skipped."""
+    sweep, serial_out = serial
+    path = write(tmp_path, TINY)
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "local cluster of 2 worker processes, 1 thread each" in said and "3 points run" in said
+    assert "deviation of Z from Liu's" in said
+    assert table(out) == table(serial_out)
+    for name in sweep.observables:
+        assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    assert "0 points run, 3 already in" in capsys.readouterr().out
+
+
+def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys):
+    """--scheduler ADDRESS: the tasks go to that cluster's workers, Taichi on each worker's own
+    thread count, and the numbers are the serial ones."""
+    sweep, serial_out = serial
+    address = cluster.scheduler.address
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
+    assert f"the Dask scheduler at {address}" in capsys.readouterr().out
+    assert table(out) == table(serial_out)
