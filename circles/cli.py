@@ -618,7 +618,8 @@ def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, sta
             lines.append(("wrote", f"{output.path} ({output.rows} row{'s' if output.rows != 1 else ''})"))
     if not outputs:
         lines.append(("wrote", "nothing (--out none)"))
-    paths = ", ".join(str(output.path) for output in outputs) or "nothing"
+    paths = " and ".join(str(output.path) for output in outputs)
+    done = f"{paths} {'are' if len(outputs) > 1 else 'is'} complete" if outputs else "it wrote no file"
     try:
         for name, text in lines:
             print(f"{name:<11} {text}")
@@ -628,7 +629,7 @@ def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, sta
         # failure. Output still buffered is dropped, so that the exit does not fail on it.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     except OSError as error:
-        raise SummaryError(f"the run is done and {paths} complete, but its summary could not be "
+        raise SummaryError(f"the run is done and {done}, but its summary could not be "
                            f"printed: {error}") from None
 
 
