@@ -428,7 +428,7 @@ class _Video:
         self.writer = FrameWriter(options["out"], options["fps"], frames)
         self.path = self.writer.path
 
-    def write(self, sim, row):
+    def write(self, sim, row, stats):
         from . import canvas
 
         tick = time.perf_counter()

@@ -150,27 +150,34 @@ class GSDWriter:
     """Appends frames of a `Simulation` to a GSD file (HOOMD schema, see the module).
 
     mode: "w" (a new file, overwriting), "x" (a new file; fails if it exists) or "a" (append to
-    a file this writer or `GSDWriter` wrote, of the same circles). In a periodic box the image
-    flags come from an `ImageTracker` attached to the simulation at the first `write` (or given
-    as `tracker`): frames are then written as the run goes, so that it sees every step. Each
-    frame is flushed to the file when written, so a run stopped at any point leaves whole frames.
+    a file that a GSDWriter wrote, of the same circles). In a periodic box the image flags come
+    from an `ImageTracker` attached to the simulation at the first `write` (or given as
+    `tracker`): frames are then written as the run goes, so that it sees every step. Each frame
+    is flushed to the file when written, so a run stopped at any point leaves whole frames.
+
+    What does not change over a run (diameters, masses, types, colours) is written in the first
+    frame only; gsd.hoomd gives every frame the first frame's value of a chunk it lacks.
     """
 
     def __init__(self, path, mode="w", tracker=None):
-        import gsd.hoomd
+        import gsd
+        import gsd.fl
+
+        from . import __version__
 
         self.path = Path(path)
-        self._file = gsd.hoomd.open(str(self.path), mode)
+        self._file = gsd.fl.open(name=str(self.path), mode=mode, application=f"circles {__version__}",
+                                 schema="hoomd", schema_version=[1, 4])
         self.tracker = tracker
-        self.frames = len(self._file)
+        self.frames = self._file.nframes
         self.seconds = 0.0  # spent writing
+        self._types = None
 
-    def write(self, sim, row=None):
+    def write(self, sim, row=None, stats=None):
         """Append the state of `sim` now, with `row` (a stats row, `observables.interval`) in its
-        log; without one, the log holds the state's own values and NaN for the rates."""
+        log (without one, the state's own values and NaN for the rates), and the totals of
+        `stats` (its `stats()` now, taken when not given)."""
         import time as clock
-
-        import gsd.hoomd
 
         tick = clock.perf_counter()
         if sim.periodic and self.tracker is None:
@@ -178,46 +185,49 @@ class GSDWriter:
                 raise ValueError("a periodic run's trajectory must start before its first step, so that every "
                                  "wrap is counted: make the GSDWriter (or an ImageTracker) at the start")
             self.tracker = ImageTracker(sim)
-        if row is None:
+        if stats is None or row is None:
             stats = sim.stats()
+        if row is None:
             row = observables.interval(stats, stats, sim.n, sim.box, sim.boundary, float(np.mean(sim._radius)))
         n = sim.n
         w, h = sim.box
-        held_pos, held_vel, pair_count, wall_count, virial, wall_impulse = sim._download()
-        frame = gsd.hoomd.Frame()
-        frame.configuration.box = [w, h, 0, 0, 0, 0]
-        frame.configuration.dimensions = 2
-        frame.configuration.step = sim.steps
-        frame.particles.N = n
-        pos = np.zeros((n, 3), np.float32)
-        pos[:, 0] = held_pos[:, 0] - 0.5 * w
-        pos[:, 1] = held_pos[:, 1] - 0.5 * h
-        vel = np.zeros((n, 3), np.float32)
-        vel[:, :2] = held_vel
-        frame.particles.position = pos
-        frame.particles.velocity = vel
+        held_pos = sim._creation_order(sim.pos.to_numpy())
+        held_vel = sim._creation_order(sim.vel.to_numpy())
+        chunk = self._file.write_chunk
+        chunk("configuration/step", np.array([sim.steps], np.uint64))
+        if self.frames == 0:
+            typeid, types = type_names(sim._radius)
+            width = max(len(name) for name in types) + 1
+            chunk("configuration/dimensions", np.array([2], np.uint8))
+            chunk("configuration/box", np.array([w, h, 0, 0, 0, 0], np.float32))
+            chunk("particles/N", np.array([n], np.uint32))
+            chunk("particles/types", np.array(types, dtype=(bytes, width)).view(np.int8).reshape(len(types), width))
+            chunk("particles/typeid", typeid)
+            chunk("particles/diameter", (2.0 * sim._radius).astype(np.float32))
+            chunk("particles/mass", sim._mass.astype(np.float32))
+            chunk("log/particles/circles/radius", sim._radius)
+            chunk("log/particles/circles/mass", sim._mass)
+            chunk("log/particles/circles/color", np.ascontiguousarray(sim._color))
+        vec = np.zeros((n, 3), np.float32)
+        np.subtract(held_pos, (0.5 * w, 0.5 * h), out=vec[:, :2], casting="unsafe")
+        chunk("particles/position", vec)
+        vec[:, :2] = held_vel
+        chunk("particles/velocity", vec)
         if self.tracker is not None:
             image = np.zeros((n, 3), np.int32)
             image[:, :2] = self.tracker.images()
-            frame.particles.image = image
-        frame.particles.diameter = (2.0 * sim._radius).astype(np.float32)
-        frame.particles.mass = sim._mass.astype(np.float32)
-        frame.particles.typeid, frame.particles.types = type_names(sim._radius)
-        log = {f"circles/{name}": np.array([row[name]], np.float64) for name in observables.COLUMNS}
-        log["circles/dt"] = np.array([sim.dt], np.float64)
-        log["circles/precision_bits"] = np.array([32 if sim.precision == "f32" else 64], np.uint8)
-        log["circles/boundary"] = _text(sim.boundary)
-        log["circles/scheme"] = _text(sim.scheme)
-        log["circles/totals"] = np.array([pair_count.sum(dtype=np.int64), wall_count.sum(dtype=np.int64),
-                                          np.sum(virial), np.sum(wall_impulse)], np.float64)
-        log["particles/circles/position"] = held_pos
-        log["particles/circles/velocity"] = held_vel
-        if self.frames == 0:
-            log["particles/circles/radius"] = sim._radius
-            log["particles/circles/mass"] = sim._mass
-            log["particles/circles/color"] = sim._color
-        frame.log = log
-        self._file.append(frame)
+            chunk("particles/image", image)
+        for name in observables.COLUMNS:
+            chunk(f"log/circles/{name}", np.array([row[name]], np.float64))
+        chunk("log/circles/dt", np.array([sim.dt], np.float64))
+        chunk("log/circles/precision_bits", np.array([32 if sim.precision == "f32" else 64], np.uint8))
+        chunk("log/circles/boundary", _text(sim.boundary))
+        chunk("log/circles/scheme", _text(sim.scheme))
+        chunk("log/circles/totals", np.array([stats["pair_collisions"], stats["wall_collisions"], stats["virial"],
+                                              stats["wall_impulse"]], np.float64))
+        chunk("log/particles/circles/position", np.ascontiguousarray(held_pos))
+        chunk("log/particles/circles/velocity", np.ascontiguousarray(held_vel))
+        self._file.end_frame()
         self._file.flush()
         self.frames += 1
         self.seconds += clock.perf_counter() - tick

@@ -92,7 +92,8 @@ def read_stats(path):
 
 class Run:
     """A simulation advanced through frame intervals (`frame_times`) with writers fired on the
-    way: `at_frame` writers' ``write(sim, row)`` at each frame instant, `at_interval` writers'
+    way: `at_frame` writers' ``write(sim, row, stats)`` at each frame instant (`stats` the
+    simulation's `stats()` then, None when no writer needs stats), `at_interval` writers'
     ``write(row)`` at each interval's end. Stats are taken only when a writer needs them.
 
     Use: ``for k in run: ...`` runs interval by interval (frame k's writers, then the advance
@@ -117,7 +118,7 @@ class Run:
     def fire_frame(self):
         """The frame writers, with the state now and the row of the interval that ended now."""
         for writer in self.at_frame:
-            writer.write(self.sim, self.row)
+            writer.write(self.sim, self.row, self.before)
 
     def advance(self, k):
         """Advance to the end of interval k."""
