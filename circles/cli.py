@@ -611,7 +611,8 @@ def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, sta
             lines.append(("wrote", f"{writer.path} ({frames_text(writer.frames)} at {writer.fps:g} fps)"
                           if writer.frames else "nothing: stopped before the first frame was written"))
         elif isinstance(output, GSDWriter):
-            each = f", {1e3 * output.seconds / output.frames:.3g} ms a frame" if output.frames else ""
+            each = (f", {1e3 * output.seconds / output.frames:.3g} ms a frame, processor time "
+                    f"{1e3 * output.cpu_seconds / output.frames:.3g} ms" if output.frames else "")
             lines.append(("wrote", f"{output.path} ({output.frames} GSD frame{'s' if output.frames != 1 else ''}"
                                    f"{each})"))
         elif isinstance(output, StatsWriter):

@@ -170,8 +170,8 @@ class GSDWriter:
                                  schema="hoomd", schema_version=[1, 4])
         self.tracker = tracker
         self.frames = self._file.nframes
-        self.seconds = 0.0  # spent writing
-        self._types = None
+        self.seconds = 0.0  # spent writing, wall-clock
+        self.cpu_seconds = 0.0  # the process's processor time meanwhile
 
     def write(self, sim, row=None, stats=None):
         """Append the state of `sim` now, with `row` (a stats row, `observables.interval`) in its
@@ -179,7 +179,7 @@ class GSDWriter:
         `stats` (its `stats()` now, taken when not given)."""
         import time as clock
 
-        tick = clock.perf_counter()
+        tick, cpu = clock.perf_counter(), clock.process_time()
         if sim.periodic and self.tracker is None:
             if sim.steps > 0:
                 raise ValueError("a periodic run's trajectory must start before its first step, so that every "
@@ -231,6 +231,7 @@ class GSDWriter:
         self._file.flush()
         self.frames += 1
         self.seconds += clock.perf_counter() - tick
+        self.cpu_seconds += clock.process_time() - cpu
 
     def close(self):
         if self.tracker is not None:
