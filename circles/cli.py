@@ -353,8 +353,6 @@ def _prepare(argv, made):
             path = getattr(args, key)
             options[key] = None if path is None else check_path(path, args.force, suffix, f"--{key}", made)
         options["force"] = args.force
-        if options["stats"] is not None and options["stats"] == options["trajectory"]:
-            raise ValueError("--stats and --trajectory name the same file")
         if str(options["out"]).lower() == "none":
             options["out"] = None
         else:
@@ -480,9 +478,10 @@ def _run(scene, options):
             outputs.append(GSDWriter(options["trajectory"], mode))
         table = StatsWriter(options["stats"], mode) if options["stats"] is not None else None
         tick = time.perf_counter()
+        measuring = options["trajectory"] is not None or table is not None
         run = Run(sim, options["duration"], options["fps"], at_frame=outputs,
-                  at_interval=[table] if table else [], need_stats=True)
-        start_stats = run.before
+                  at_interval=[table] if table else [], need_stats=measuring)
+        start_stats = run.before if measuring else sim.stats()
         stats_s = time.perf_counter() - tick
         if table:
             outputs.append(table)
