@@ -13,11 +13,14 @@ EXIT_BAD_INPUT = 2
 HINT = "circles: error: circles plot needs matplotlib: pip install 'circles[plot]' (or pip install matplotlib)"
 
 
+DESCRIPTION = ("Draw energy, pressure (virial and wall) and collision rate of a stats table (circles run "
+               "--stats) against time, into a PNG.")
+
+
 def add_parser(commands):
     """The ``plot`` subcommand's arguments, on the parser of subcommands `commands`."""
     plot = commands.add_parser("plot", help="draw a stats table against time into a PNG",
-                               description="Draw energy, pressure (virial and wall) and collision rate "
-                                           "of a stats table (circles run --stats) against time, into a PNG.")
+                               description=DESCRIPTION)
     _arguments(plot)
     return plot
 
@@ -63,7 +66,7 @@ def main(argv):
     """``circles plot``'s entry point; returns the exit status."""
     from .writers import read_stats
 
-    parser = _Parser(prog="circles plot", description=add_parser.__doc__)
+    parser = _Parser(prog="circles plot", description=DESCRIPTION)
     _arguments(parser)
     try:
         args = parser.parse_args(argv)
