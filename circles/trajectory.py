@@ -250,7 +250,8 @@ def read_simulation(path, frame=-1, *, track_images=True):
     """A `Simulation` in the state of frame `frame` of a GSD file that `GSDWriter` wrote: the
     positions and velocities as the simulation held them (bit for bit), radii, masses, colours,
     box, boundary, scheme, precision, dt, time and step count. In a periodic box it carries on
-    the image flags (`sim.image_tracker`) unless `track_images` is False."""
+    the image flags (`sim.image_tracker`) unless `track_images` is False: to go on with the same
+    trajectory, ``GSDWriter(path, "a", tracker=sim.image_tracker)``."""
     import gsd.hoomd
 
     from .simulation import Simulation
