@@ -171,3 +171,32 @@ def test_frame_times():
     assert frame_times(1.0, 4) == [0.0, 0.25, 0.5, 0.75, 1.0]
     assert frame_times(0.9, 4) == [0.0, 0.25, 0.5, 0.75, 0.9]
     assert frame_times(0.1, 4) == [0.0, 0.1]
+
+
+def test_a_restarted_run_goes_on_with_the_same_trajectory(circles_cpu, tmp_path):
+    """Frames appended after a restart from the last frame equal those of the run that did not
+    stop, image flags included."""
+    whole, split = tmp_path / "whole.gsd", tmp_path / "split.gsd"
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, n=40, radius=0.05))
+    with GSDWriter(whole) as writer:
+        for _ in range(4):
+            writer.write(sim)
+            sim.advance(0.6)
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, n=40, radius=0.05))
+    with GSDWriter(split) as writer:
+        for _ in range(2):
+            writer.write(sim)
+            sim.advance(0.6)
+    restarted = read_simulation(split, -1)
+    restarted.advance(0.6)
+    with GSDWriter(split, "a", tracker=restarted.image_tracker) as writer:
+        for _ in range(2):
+            writer.write(restarted)
+            restarted.advance(0.6)
+    with gsd.hoomd.open(str(whole)) as a, gsd.hoomd.open(str(split)) as b:
+        assert len(a) == len(b) == 4
+        assert np.abs(a[3].particles.image).max() >= 1
+        for k in range(4):
+            for chunk in ("position", "velocity", "image"):
+                np.testing.assert_array_equal(getattr(a[k].particles, chunk), getattr(b[k].particles, chunk))
+            assert a[k].configuration.step == b[k].configuration.step
