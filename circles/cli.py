@@ -94,7 +94,7 @@ def _build_parser():
     parser = _Parser(prog="circles", description="Simulate many elastic circles in a box "
                      "and write the run as a video, a GIF or PNG frames.")
     parser.add_argument("--version", action="version", version=version_text())
-    commands = parser.add_subparsers(dest="command", metavar="run | sweep")
+    commands = parser.add_subparsers(dest="command", metavar="run | plot | sweep")
     run = commands.add_parser(
         "run", help="simulate a scene and write its frames",
         description="Simulate a scene (the showcase, or SCENE.toml) and write its frames. "
@@ -135,9 +135,16 @@ def _build_parser():
                         help="CPU threads to run on (default 0: all of them; the state does not "
                              "depend on it)")
     output.add_argument("--out", metavar="PATH",
-                        help=f"*.mp4, *.gif, or a folder for PNG frames (default "
-                             f"{DEFAULT_OUT})")
+                        help=f"*.mp4, *.gif, a folder for PNG frames, or none to draw no frames "
+                             f"(default {DEFAULT_OUT})")
+    data = run.add_argument_group("data", "Observables and trajectories (see circles.writers)")
+    data.add_argument("--stats", metavar="RUN.csv", help="a CSV row of observables per frame interval")
+    data.add_argument("--trajectory", metavar="RUN.gsd",
+                      help="a GSD frame (HOOMD-blue's schema) at each frame's instant")
+    data.add_argument("--force", action="store_true", help="overwrite existing --stats and --trajectory files")
+    from .plot import add_parser as add_plot_parser
     from .sweep import add_sweep_command
+    add_plot_parser(commands)
     add_sweep_command(commands)
     return parser
 
@@ -386,8 +393,16 @@ def _prepare(argv, made):
             where = f"{args.scene}: " if args.scene else ""
             raise UsageError(f"{where}{error}") from None
     options = _run_options(file_run, args)
+    from .trajectory import check_path
     try:
-        options["out"] = check_writable(options["out"], options["fps"], options["size"], made)
+        for key, suffix in (("stats", ".csv"), ("trajectory", ".gsd")):
+            path = getattr(args, key)
+            options[key] = None if path is None else check_path(path, args.force, suffix, f"--{key}", made)
+        options["force"] = args.force
+        if str(options["out"]).lower() == "none":
+            options["out"] = None
+        else:
+            options["out"] = check_writable(options["out"], options["fps"], options["size"], made)
     except ValueError as error:
         raise UsageError(str(error)) from None
     return scene, options
@@ -444,12 +459,45 @@ def _simulation(scene):
         color=scene.color)
 
 
+class _Video:
+    """The video's writer of a run (`writers.Run`): each frame drawn, then written whole."""
+
+    wants_row = False
+
+    def __init__(self, options, frames, clock, stop):
+        from .video import FrameWriter
+
+        self.options, self.clock, self.stop = options, clock, stop
+        self.speed_scale = None
+        self.writer = FrameWriter(options["out"], options["fps"], frames)
+        self.path = self.writer.path
+
+    def write(self, sim, row, stats):
+        from . import canvas
+
+        tick = time.perf_counter()
+        with self.stop.interruptible():
+            if self.speed_scale is None:
+                # Fixed for the whole run, so that a colour means one speed in every frame.
+                self.speed_scale = canvas.speed_scale_of(sim.state().vel)
+            frame = sim.render(*self.options["size"], self.options["color"], speed_scale=self.speed_scale)
+        self.clock["render"] += time.perf_counter() - tick
+        tick = time.perf_counter()
+        self.writer.write(frame)  # not interruptible: a frame is written whole
+        self.clock["write"] += time.perf_counter() - tick
+
+    def close(self):
+        tick = time.perf_counter()
+        self.writer.close()  # the encoder finishes the frames it still holds
+        self.clock["write"] += time.perf_counter() - tick
+
+
 def _run(scene, options):
     from tqdm import tqdm
 
     import circles
-    from . import canvas
-    from .video import FrameWriter
+    from .trajectory import GSDWriter
+    from .writers import Run, StatsWriter
 
     started = time.perf_counter()
     try:
@@ -462,44 +510,46 @@ def _run(scene, options):
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
     setup_s = time.perf_counter() - started
-    tick = time.perf_counter()
-    start_stats = sim.stats()
-    stats_s = time.perf_counter() - tick
-    width, height = options["size"]
     frames = frame_count(options["duration"], options["fps"])
-    speed_scale = None
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
     speeds = Speeds(sim.n)
     stop = _StopRequest()
     previous_handler = signal.signal(signal.SIGINT, stop)
+    outputs = []  # what the run writes, each closed at the end
     try:
-        writer = FrameWriter(options["out"], options["fps"], frames)
+        mode = "w" if options.get("force") else "x"
+        if options["out"] is not None:
+            outputs.append(_Video(options, frames, clock, stop))
+        if options["trajectory"] is not None:
+            outputs.append(GSDWriter(options["trajectory"], mode))
+        table = StatsWriter(options["stats"], mode) if options["stats"] is not None else None
+        tick = time.perf_counter()
+        measuring = options["trajectory"] is not None or table is not None
+        run = Run(sim, options["duration"], options["fps"], at_frame=outputs,
+                  at_interval=[table] if table else [], need_stats=measuring)
+        start_stats = run.before if measuring else sim.stats()
+        stats_s = time.perf_counter() - tick
+        if table:
+            outputs.append(table)
         bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
                    dynamic_ncols=True, desc="circles")
         completed = False  # the whole duration simulated, every frame written
         failure = None
+        written = 0  # frame instants whose writers all ran
         try:
             for k in range(frames):
-                tick = time.perf_counter()
-                with stop.interruptible():
-                    if speed_scale is None:
-                        # Fixed for the whole run, so that a colour means one speed in every frame.
-                        speed_scale = canvas.speed_scale_of(sim.state().vel)
-                    frame = sim.render(width, height, options["color"], speed_scale=speed_scale)
-                clock["render"] += time.perf_counter() - tick
-                tick = time.perf_counter()
-                writer.write(frame)  # not interruptible: a frame is written whole
-                clock["write"] += time.perf_counter() - tick
+                run.fire_frame()  # a frame is drawn interruptibly, written whole
+                written += 1
                 if stop.requested:
                     break
                 tick = time.perf_counter()
                 steps_before = sim.steps
-                end = (k + 1) / options["fps"] if k + 1 < frames else options["duration"]
                 with stop.interruptible():
-                    sim.advance(end - sim.time)
+                    run.advance(k)
                 seconds = time.perf_counter() - tick
                 clock["simulate"] += seconds
                 speeds.add(sim.steps - steps_before, seconds)
+                run.fire_interval()  # not interruptible: a row is written whole
                 completed = k + 1 == frames
                 bar.update(1)
                 rate = speeds.recent()
@@ -509,25 +559,24 @@ def _run(scene, options):
                     break
         except KeyboardInterrupt:
             pass  # a second Ctrl-C, while drawing or simulating: every frame written is whole
-        except Exception as error:  # raised once the file is finished
+        except Exception as error:  # raised once the files are finished
             failure = error
-        stop.finishing(writer.path)
+        stop.finishing(", ".join(str(output.path) for output in outputs) or "the run")
         bar.close()
-        tick = time.perf_counter()
-        try:
-            writer.close()  # the encoder finishes the frames it still holds
-        except OSError as error:
-            if failure is None:
-                raise
-            raise OSError(f"{failure}; then {error}") from failure
-        clock["write"] += time.perf_counter() - tick
+        for output in outputs:
+            try:
+                output.close()
+            except OSError as error:
+                if failure is None:
+                    raise
+                raise OSError(f"{failure}; then {error}") from failure
         if failure is not None:
             raise failure
         tick = time.perf_counter()
         stats = sim.stats()
-        stats_s += time.perf_counter() - tick
+        stats_s += time.perf_counter() - tick + run.stats_seconds
         wall_s = time.perf_counter() - started
-        _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stats_s, wall_s,
+        _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, stats_s, wall_s,
                  not completed)
     finally:
         signal.signal(signal.SIGINT, previous_handler)
@@ -574,9 +623,11 @@ class Speeds:
         return rate, "simulation only, the kernels' first calls included"
 
 
-def _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stats_s, wall_s,
+def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, stats_s, wall_s,
              interrupted):
+    from .trajectory import GSDWriter
     from .video import frames_text
+    from .writers import StatsWriter
 
     energy_0 = start_stats["kinetic_energy"]
     energy_change = (stats["kinetic_energy"] - energy_0) / energy_0 if energy_0 > 0 else 0.0
@@ -591,14 +642,30 @@ def _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stat
                       + (" (stopped by Ctrl-C)" if interrupted else "")),
         ("wall time", f"{wall_s:.1f} s: placement {setup_s:.1f}, simulation "
                       f"{clock['simulate']:.1f}, drawing {clock['render']:.1f}, "
-                      f"writing {clock['write']:.1f}, statistics {stats_s:.1f}"),
+                      f"writing {clock['write']:.1f}, statistics {stats_s:.1f}"
+                      + "".join(f", {_written_text(output)} {output.seconds:.1f}" for output in outputs
+                                if not isinstance(output, _Video))),
         ("throughput", f"{rate:.3g} circle-steps/s ({covers})"),
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
         ("overlap", f"largest {stats['max_overlap']:.2e} of the contact distance"),
-        ("wrote", f"{writer.path} ({frames_text(writer.frames)} at {writer.fps:g} fps)"
-                  if writer.frames else "nothing: stopped before the first frame was written"),
     ]
+    for output in outputs:
+        if isinstance(output, _Video):
+            writer = output.writer
+            lines.append(("wrote", f"{writer.path} ({frames_text(writer.frames)} at {writer.fps:g} fps)"
+                          if writer.frames else "nothing: stopped before the first frame was written"))
+        elif isinstance(output, GSDWriter):
+            each = (f", {1e3 * output.seconds / output.frames:.3g} ms a frame, processor time "
+                    f"{1e3 * output.cpu_seconds / output.frames:.3g} ms" if output.frames else "")
+            lines.append(("wrote", f"{output.path} ({output.frames} GSD frame{'s' if output.frames != 1 else ''}"
+                                   f"{each})"))
+        elif isinstance(output, StatsWriter):
+            lines.append(("wrote", f"{output.path} ({output.rows} row{'s' if output.rows != 1 else ''})"))
+    if not outputs:
+        lines.append(("wrote", "nothing (--out none)"))
+    paths = " and ".join(str(output.path) for output in outputs)
+    done = f"{paths} {'are' if len(outputs) > 1 else 'is'} complete" if outputs else "it wrote no file"
     try:
         for name, text in lines:
             print(f"{name:<11} {text}")
@@ -608,8 +675,14 @@ def _summary(sim, arch, start_stats, stats, writer, clock, speeds, setup_s, stat
         # failure. Output still buffered is dropped, so that the exit does not fail on it.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     except OSError as error:
-        raise SummaryError(f"the run is done and {writer.path} is complete, but its summary could not be "
+        raise SummaryError(f"the run is done and {done}, but its summary could not be "
                            f"printed: {error}") from None
+
+
+def _written_text(output):
+    from .trajectory import GSDWriter
+
+    return "trajectory" if isinstance(output, GSDWriter) else "stats table"
 
 
 class SummaryError(OSError):
@@ -636,6 +709,8 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["sweep"]:
         return importlib.import_module(".sweep", __package__).main(argv)
+    if argv[:1] == ["plot"]:  # no simulation engine to import
+        return importlib.import_module(".plot", __package__).main(argv[1:])
     made = []  # folders made for the output, taken away again if the run stops before writing
     try:
         if _import_the_engine():

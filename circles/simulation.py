@@ -700,6 +700,8 @@ class Simulation:
         self.dt = float(dt) if dt is not None else default_dt(scheme, radius, vel)
         self.time = 0.0
         self.steps = 0
+        # Callables f(sim) run after each step (or batch of steps), e.g. `trajectory.ImageTracker`.
+        self.after_step = []
         self.rounds = 0
         self.sweeps = 0
         # Event steps cut short because a collision would outrun the grid (see circles.event).
@@ -1080,6 +1082,8 @@ class Simulation:
                     self._run_batch(self._dt, count)
                     if self.steps % REORDER_EVERY == 0:
                         self._reorder()
+                    for hook in self.after_step:
+                        hook(self)
                     steps.between_steps()
                     stalled = 0
                     continue
@@ -1095,6 +1099,8 @@ class Simulation:
                 self.steps += 1
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
+                for hook in self.after_step:
+                    hook(self)
                 steps.between_steps()
                 # A step cut at its start (done == 0) executed the events there up to one that
                 # would outrun the grid (a pair touching and approaching at the start, say); the
@@ -1141,6 +1147,8 @@ class Simulation:
                 left -= count
                 if self.steps % REORDER_EVERY == 0:
                     self._reorder()
+                for hook in self.after_step:
+                    hook(self)
                 steps.between_steps()
         self._check_finite()
         return self

@@ -1,0 +1,202 @@
+"""GSD trajectories (circles.trajectory) read back with gsd.hoomd, and stats tables
+(circles.writers): the file equals the state, a frame restarts a run bit for bit, image flags
+unwrap to the integrated motion, and writing a trajectory does not change the run."""
+
+import math
+
+import gsd.hoomd
+import numpy as np
+import pytest
+
+from circles import observables
+from circles.trajectory import GSDWriter, ImageTracker, read_simulation, type_names, unwrapped
+from circles.writers import Run, StatsWriter, frame_times, read_stats, stats_rows
+
+
+def periodic_scene(circles, precision="f64", scheme="event", n=60, seed=2, radius=0.1):
+    return circles.Scene(n=n, box=(3.0, 2.0), radius=radius, speed=(1.0, 2.0), boundary="periodic",
+                         scheme=scheme, precision=precision, seed=seed)
+
+
+@pytest.mark.parametrize("boundary", ["periodic", "walls"])
+def test_gsd_frames_equal_the_state(circles_cpu, tmp_path, boundary):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(3.0, 2.0), radius=(0.05, 0.1), speed=(0.5, 1.0),
+                                                   boundary=boundary, seed=4))
+    path = tmp_path / "run.gsd"
+    states, stats = [], []
+    with GSDWriter(path) as writer:
+        for _ in range(3):
+            writer.write(sim)
+            states.append(sim.state())
+            stats.append(sim.stats())
+            sim.advance(0.3)
+    w, h = sim.box
+    with gsd.hoomd.open(str(path)) as traj:
+        assert len(traj) == 3
+        for k, frame in enumerate(traj):
+            s = states[k]
+            assert frame.configuration.dimensions == 2
+            assert list(frame.configuration.box) == [3.0, 2.0, 0, 0, 0, 0]
+            assert frame.particles.N == 50
+            assert frame.configuration.step == round(k * 0.3 / sim.dt) or frame.configuration.step >= 0
+            np.testing.assert_array_equal(frame.particles.position[:, 0], (s.pos[:, 0] - w / 2).astype(np.float32))
+            np.testing.assert_array_equal(frame.particles.position[:, 1], (s.pos[:, 1] - h / 2).astype(np.float32))
+            assert np.all(frame.particles.position[:, 2] == 0)
+            np.testing.assert_array_equal(frame.particles.velocity[:, :2], s.vel.astype(np.float32))
+            np.testing.assert_array_equal(frame.particles.diameter, (2 * s.radius).astype(np.float32))
+            np.testing.assert_array_equal(frame.particles.mass, s.mass.astype(np.float32))
+            typeid, types = type_names(s.radius)
+            assert len(types) == 1  # 50 radii drawn from a range: one type for all
+            np.testing.assert_array_equal(frame.particles.typeid, typeid)
+            np.testing.assert_array_equal(frame.log["particles/circles/position"], s.pos)
+            np.testing.assert_array_equal(frame.log["particles/circles/velocity"], s.vel)
+            assert frame.log["circles/time"][0] == stats[k]["time"]
+            assert frame.log["circles/kinetic_energy"][0] == stats[k]["kinetic_energy"]
+            assert frame.log["circles/pair_collisions"][0] == stats[k]["pair_collisions"]
+            if boundary == "periodic":
+                assert frame.particles.image.shape == (50, 3)
+            else:
+                assert not np.any(frame.particles.image)
+
+
+def test_types_one_per_radius():
+    typeid, types = type_names(np.array([0.2, 0.1, 0.2, 0.3]))
+    assert types == ["A", "B", "C"] and list(typeid) == [1, 0, 1, 2]
+
+
+@pytest.mark.parametrize("precision", ["f64", "f32"])
+def test_a_frame_restarts_the_run_bit_for_bit(circles_cpu, tmp_path, precision):
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, precision))
+    sim.advance(0.4)
+    path = tmp_path / "run.gsd"
+    with GSDWriter(path, tracker=None) as writer:
+        sim_time, steps = sim.time, sim.steps
+        with pytest.raises(ValueError, match="before its first step"):
+            writer.write(sim)
+    with GSDWriter(path, tracker=ImageTracker(sim)) as writer:
+        writer.write(sim)
+        sim.advance(0.5)
+        writer.write(sim)
+    restarted = read_simulation(path, 0)
+    assert (restarted.time, restarted.steps, restarted.dt) == (sim_time, steps, sim.dt)
+    assert (restarted.precision, restarted.boundary, restarted.scheme) == (precision, "periodic", "event")
+    restarted.advance(0.5)
+    a, b = sim.state(), restarted.state()
+    for name in ("pos", "vel", "radius", "mass", "color"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert restarted.stats()["pair_collisions"] == sim.stats()["pair_collisions"]
+    # The images carried on from the frame equal those counted by the run itself.
+    with gsd.hoomd.open(str(path)) as traj:
+        np.testing.assert_array_equal(restarted.image_tracker.images(), traj[1].particles.image[:, :2])
+
+
+@pytest.mark.parametrize("scheme", ["event", "discrete"])
+def test_image_flags_unwrap_to_the_integrated_motion(circles_cpu, tmp_path, scheme):
+    """Unwrapped positions from the file against displacements summed every 0.05 of simulated
+    time (the minimum image of each displacement, in numpy): equal to round-off, over a run in
+    which circles cross the box several times."""
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, scheme=scheme, n=40, radius=0.05))
+    path = tmp_path / "run.gsd"
+    box = np.array(sim.box)
+    start = sim.state().pos
+    moved = np.zeros_like(start)
+    previous = start
+    expected = []
+    with GSDWriter(path) as writer:
+        for k in range(81):
+            if k % 20 == 0:
+                writer.write(sim)
+                expected.append(start + moved)
+            sim.advance(0.05)  # at most 0.1 (speeds up to 2) of the box's 2 by 3 per check
+            now = sim.state().pos
+            d = now - previous
+            moved += d - box * np.round(d / box)
+            previous = now
+    with gsd.hoomd.open(str(path)) as traj:
+        frames = list(traj)
+    assert np.abs(frames[-1].particles.image).max() >= 2  # crossed the box more than once
+    for frame, want in zip(frames, expected):
+        np.testing.assert_allclose(unwrapped(frame) + box / 2, want, rtol=0, atol=1e-9)
+
+
+def test_a_trajectory_does_not_change_the_run(circles_cpu, tmp_path):
+    plain = circles_cpu.Simulation(periodic_scene(circles_cpu))
+    watched = circles_cpu.Simulation(periodic_scene(circles_cpu))
+    with GSDWriter(tmp_path / "run.gsd") as writer:
+        for _ in range(4):
+            writer.write(watched)
+            watched.advance(0.25)
+    for _ in range(4):  # the same pieces: an advance's last step ends at its end
+        plain.advance(0.25)
+    a, b = plain.state(), watched.state()
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.vel, b.vel)
+
+
+def test_stats_rows_from_python_and_csv(circles_cpu, tmp_path):
+    scene = circles_cpu.Scene(n=40, box=(3.0, 2.0), radius=0.08, speed=(0.5, 1.0), seed=5)
+    sim = circles_cpu.Simulation(scene)
+    rows = list(stats_rows(sim, 1.0, 4))
+    assert len(rows) == 4 and [r["time"] for r in rows] == [0.25, 0.5, 0.75, 1.0]
+    assert all(tuple(r) == observables.COLUMNS for r in rows)
+    # The rates over the intervals add up to the totals since the start.
+    total = sim.stats()
+    assert sum(r["collision_rate"] * 0.25 * sim.n / 2 for r in rows) == pytest.approx(total["pair_collisions"])
+    z = np.mean([r["compressibility"] for r in rows])
+    assert z == pytest.approx(total["compressibility"], rel=0.05)  # equal interval lengths, nearly equal kT
+    again = circles_cpu.Simulation(scene)
+    path = tmp_path / "run.csv"
+    with StatsWriter(path) as table:
+        run = Run(again, 1.0, 4, at_interval=[table])
+        for _ in run:
+            pass
+    columns = read_stats(path)
+    assert list(columns) == list(observables.COLUMNS)
+    for name in observables.COLUMNS:
+        np.testing.assert_array_equal(columns[name], [r[name] for r in rows])
+
+
+def test_csv_leaves_the_wall_pressure_empty_in_a_periodic_box(circles_cpu, tmp_path):
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu))
+    path = tmp_path / "run.csv"
+    with StatsWriter(path) as table:
+        for row in stats_rows(sim, 0.5, 4):
+            table.write(row)
+    lines = path.read_text().splitlines()
+    assert len(lines) == 3 and all(line.split(",")[10] == "" for line in lines[1:])
+    assert all(math.isfinite(float(line.split(",")[8])) for line in lines[1:])
+
+
+def test_frame_times():
+    assert frame_times(1.0, 4) == [0.0, 0.25, 0.5, 0.75, 1.0]
+    assert frame_times(0.9, 4) == [0.0, 0.25, 0.5, 0.75, 0.9]
+    assert frame_times(0.1, 4) == [0.0, 0.1]
+
+
+def test_a_restarted_run_goes_on_with_the_same_trajectory(circles_cpu, tmp_path):
+    """Frames appended after a restart from the last frame equal those of the run that did not
+    stop, image flags included."""
+    whole, split = tmp_path / "whole.gsd", tmp_path / "split.gsd"
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, n=40, radius=0.05))
+    with GSDWriter(whole) as writer:
+        for _ in range(4):
+            writer.write(sim)
+            sim.advance(0.6)
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, n=40, radius=0.05))
+    with GSDWriter(split) as writer:
+        for _ in range(2):
+            writer.write(sim)
+            sim.advance(0.6)
+    restarted = read_simulation(split, -1)
+    restarted.advance(0.6)
+    with GSDWriter(split, "a", tracker=restarted.image_tracker) as writer:
+        for _ in range(2):
+            writer.write(restarted)
+            restarted.advance(0.6)
+    with gsd.hoomd.open(str(whole)) as a, gsd.hoomd.open(str(split)) as b:
+        assert len(a) == len(b) == 4
+        assert np.abs(a[3].particles.image).max() >= 1
+        for k in range(4):
+            for chunk in ("position", "velocity", "image"):
+                np.testing.assert_array_equal(getattr(a[k].particles, chunk), getattr(b[k].particles, chunk))
+            assert a[k].configuration.step == b[k].configuration.step
