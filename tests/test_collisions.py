@@ -377,7 +377,7 @@ def assert_runs_equal(runs, boundary, pairs, walls):
     np.testing.assert_array_equal(a.vel, b.vel)
 
 
-@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+@pytest.mark.parametrize("boundary", ["walls", pytest.param("periodic", marks=pytest.mark.slow)])
 def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatch, boundary):
     """A discrete scene whose circles share one radius and one mass reads the first circle's
     (`discrete.per_circle`): the run must be the same bit for bit as one that reads each
@@ -398,6 +398,7 @@ def test_discrete_equal_circles_read_one_radius_and_mass(circles_cpu, monkeypatc
     assert not unequal._uniform
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="one thread or several is a CPU's choice")
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_discrete_on_one_thread_equals_several(circles_cpu, monkeypatch, boundary):
@@ -416,6 +417,7 @@ def test_discrete_on_one_thread_equals_several(circles_cpu, monkeypatch, boundar
     assert_runs_equal(runs, boundary, pairs=10000, walls=500)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypatch, boundary):
     """On a CPU with several threads a step's first round runs in one part of the circles per
@@ -439,6 +441,7 @@ def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypa
     assert_runs_equal(runs, boundary, pairs=10000, walls=500)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
     """On a CPU with several threads a discrete step runs as one team (`discrete.team_step`,
@@ -465,6 +468,7 @@ def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
     assert_runs_equal([runs[0], one[0]], boundary, pairs=10000, walls=500)
 
 
+@pytest.mark.slow
 def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch):
     """The team step (see above) on a two-level grid, whose large circles search their blocks
     in a stage of their own: the state of the step's loops, bit for bit."""
@@ -489,7 +493,8 @@ def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="steps run on one thread on a CPU only")
-@pytest.mark.parametrize("name", ["walls-f32", "periodic-f32", "walls-f64-dense", "two-level-f32"])
+@pytest.mark.parametrize("name", ["walls-f32", *(pytest.param(name, marks=pytest.mark.slow)
+                                                for name in ("periodic-f32", "walls-f64-dense", "two-level-f32"))])
 def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, name):
     """Where a discrete step runs on one thread, `step(k)` and `advance` run up to
     simulation.DISCRETE_STEPS_AT_ONCE steps in one launch (`discrete.serial_steps`), a batch

@@ -44,7 +44,7 @@ def run_until_collisions(sim, target):
     return sim.stats()["pair_collisions"]
 
 
-@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+@pytest.mark.parametrize("boundary", ["walls", pytest.param("periodic", marks=pytest.mark.slow)])
 def test_energy_and_momentum_over_1e5_collisions(circles_cpu, boundary):
     """3000 circles, radii 0.005 to 0.009 (area fraction 0.25), masses
     proportional to area. Energy (engine's stats and math.fsum over state())
@@ -110,7 +110,8 @@ def test_no_overlap_and_inside_walls_dense(circles_cpu, boundary):
     assert last > 5 * n
 
 
-@pytest.mark.parametrize("radius, precision, bound", [(0.5, "f32", 5e-6), (0.5, "f64", 2e-14), (0.3, "f64", 5e-15)])
+@pytest.mark.parametrize("radius, precision, bound", [pytest.param(0.5, "f32", 5e-6, marks=pytest.mark.slow),
+                                                     (0.5, "f64", 2e-14), (0.3, "f64", 5e-15)])
 def test_energy_round_off_does_not_drift_one_way(circles_cpu, radius, precision, bound):
     """2000 equal circles at area fraction 0.3 for 400 s, about 262 collisions a circle (524000 in
     all). Each collision rounds the pair's energy by about one unit in the last place, a 1000th

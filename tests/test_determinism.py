@@ -61,24 +61,31 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_same_state_with_1_and_2_threads(tmp_path):
+# One scene of each scheme in the default suite, the other three in the slow one.
+@pytest.mark.parametrize("names", [("event_periodic", "discrete_walls"),
+                                   pytest.param(("event_walls", "event_dense", "discrete_periodic"),
+                                                marks=pytest.mark.slow)], ids=["default", "rest"])
+def test_same_state_with_1_and_2_threads(tmp_path, names):
     """On the CPU each scene runs its loops on the threads (one queue for the event scheme
     with one thread, parts with two); the states must agree bit for bit."""
-    scenes = json.dumps({name: {k: list(v) if isinstance(v, tuple) else v for k, v in kw.items()}
-                         for name, kw in SCENES.items()})
+    scenes = json.dumps({name: {k: list(v) if isinstance(v, tuple) else v for k, v in SCENES[name].items()}
+                         for name in names})
     first, second = compared_runs()
     one = run_script(SCRIPT, first, tmp_path / "first.npz", scenes, timeout=600)
     two = run_script(SCRIPT, second, tmp_path / "second.npz", scenes, timeout=600)
     assert sorted(one.files) == sorted(two.files)
     different = [key for key in one.files if not np.array_equal(one[key], two[key])]
     assert not different, f"differ between runs {first} and {second}: {different}"
-    for name in SCENES:
+    for name in names:
         assert one[f"{name}.counts"][0] > 500  # the runs did collide
 
 
-@pytest.mark.parametrize("precision", ["f64", "f32"])
-@pytest.mark.parametrize("scheme", ["event", "discrete"])
-@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+# Every pair of a scheme, a boundary and a precision in the default suite (the four cases of an
+# orthogonal array); the other four in the slow one.
+@pytest.mark.parametrize("scheme,boundary,precision", [
+    ("event", "walls", "f64"), ("event", "periodic", "f32"), ("discrete", "walls", "f32"), ("discrete", "periodic", "f64"),
+    *(pytest.param(*case, marks=pytest.mark.slow) for case in (("event", "walls", "f32"), ("event", "periodic", "f64"),
+                                                               ("discrete", "walls", "f64"), ("discrete", "periodic", "f32")))])
 def test_save_load_continue_is_seamless(circles_cpu, tmp_path, scheme, boundary, precision):
     """2k steps straight equal k steps, save, load, k steps, bit for bit (the states load: their
     places pass load's checks, up to the rounding of the precision)."""
@@ -300,6 +307,7 @@ with open(sys.argv[2], "wb") as out:
 """
 
 
+@pytest.mark.slow
 def test_a_restart_of_the_runtime_leaves_old_simulations_refusing_and_new_ones_exact(tmp_path):
     """circles.init called again restarts Taichi: the simulations made before let go of their
     arrays and refuse every use with a RuntimeError that says so (before, a step of a new

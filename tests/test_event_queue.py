@@ -91,7 +91,8 @@ def run(circles, monkeypatch, scene, queue, steps=25):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("name", [name if name in ("walls-f64-radius", "walls-f64-spread")
+                                  else pytest.param(name, marks=pytest.mark.slow) for name in SCENES])
 def test_queue_equals_rounds_bit_for_bit(circles_cpu, monkeypatch, name):
     rounds = run(circles_cpu, monkeypatch, SCENES[name], False)
     queue = run(circles_cpu, monkeypatch, SCENES[name], True)
@@ -149,6 +150,7 @@ def test_a_neighbour_that_turns_back_bounds_the_rounds(circles_cpu, monkeypatch,
         assert np.array_equal(got, other.events())
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name", ["walls-f32-equal", "periodic-f32-dense", "periodic-f64-area"])
 def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
@@ -166,7 +168,8 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), ("walls-f64-radius", 4), ("walls-f32-radius", 4),
+@pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), pytest.param("walls-f64-radius", 4, marks=pytest.mark.slow),
+                                         pytest.param("walls-f32-radius", 4, marks=pytest.mark.slow),
                                          ("periodic-f64-area", 4), ("walls-f32-slow-fast", 4),
                                          ("walls-f64-radius", 16), ("walls-f32-radius", 16),
                                          ("walls-f32-equal", 10**9), ("walls-f32-wide", 4), ("periodic-f64-wide", 4)],
@@ -226,8 +229,10 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("name,parts", [("walls-f32-radius", False), ("periodic-f32-dense", False),
-                                        ("walls-f32-radius", True), ("periodic-f64-area", True)],
+@pytest.mark.parametrize("name,parts", [("walls-f32-radius", False),
+                                        pytest.param("periodic-f32-dense", False, marks=pytest.mark.slow),
+                                        pytest.param("walls-f32-radius", True, marks=pytest.mark.slow),
+                                        pytest.param("periodic-f64-area", True, marks=pytest.mark.slow)],
                          ids=["one-queue", "one-queue-periodic", "parts-cut-steps", "parts-periodic"])
 def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, name, parts):
     """The queue's finish (`event.finish`, and `event.queue_step`'s own) also measures the
@@ -264,7 +269,7 @@ def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, na
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("name", ["walls-f64-radius", "periodic-f64-area"])
+@pytest.mark.parametrize("name", [pytest.param("walls-f64-radius", marks=pytest.mark.slow), "periodic-f64-area"])
 def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
     """The parts' events write what they add to the counts and sums to a log, added once the
     step is done (`event.queue_parts`, `event.apply_sums`). With a log far too short for a
@@ -322,6 +327,7 @@ def test_equal_radii_with_masses_of_their_own_keep_the_arrays(circles_cpu, monke
     assert np.all(equal.inv_mass.to_numpy() == equal._same[1])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cpu, monkeypatch):
     """400 circles at area fraction 0.75 with their loops on the threads and no room for claims:
@@ -342,6 +348,7 @@ def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cp
     assert_same_as_rounds(rounds, sim)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
     """A split into parts (`Simulation._part_shape`) asks for a multiple of the threads, so that
@@ -363,6 +370,7 @@ def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
     assert parts == 2 * threads and rows * (parts - 1) < sim.grid.ncy <= rows * parts
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("boundary", ["walls", "periodic"])
 def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, boundary):
@@ -591,7 +599,7 @@ def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypa
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
-@pytest.mark.parametrize("precision", ["f32", "f64"])
+@pytest.mark.parametrize("precision", [pytest.param("f32", marks=pytest.mark.slow), "f64"])
 def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, precision):
     """A walled box with 2% of the circles 10 times larger: the queue's grid has two levels
     (cells sized for the small circles, the large ones also in coarse cells, see
@@ -703,6 +711,7 @@ def test_queue_uses_the_bucket_width_its_heads_were_made_for(circles_cpu, monkey
         assert touched == sim.n
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_cpu, monkeypatch):
     """event.split_parts gives each border an equal share of `claimed` (its length over the

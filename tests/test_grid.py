@@ -226,7 +226,7 @@ def test_neighbour_ranges_cover_the_3x3_block(circles_cpu, periodic, box, transp
         assert sum(list(fwd[i]).index(-1) for i in range(n)) == len(every)
 
 
-@pytest.mark.parametrize("precision", ["f32", "f64"])
+@pytest.mark.parametrize("precision", ["f32", pytest.param("f64", marks=pytest.mark.slow)])
 def test_discrete_two_level_grid_matches_one_level(circles_cpu, monkeypatch, precision):
     """A walled box with 2% of the circles 10 times larger: the discrete scheme sizes its cells
     for the small circles and lets each large one search the block its reach spans
@@ -295,8 +295,9 @@ def test_reorder_keeps_the_arrays_in_cell_order(circles_cpu, scheme):
     assert np.array_equal(before.pos, after.pos) and np.array_equal(before.vel, after.vel)
 
 
-@pytest.mark.parametrize("scheme,boundary,precision", [("event", "walls", "f32"), ("event", "periodic", "f64"),
-                                                       ("discrete", "walls", "f32"), ("discrete", "periodic", "f32")])
+@pytest.mark.parametrize("scheme,boundary,precision", [
+    ("event", "walls", "f32"), *(pytest.param(*case, marks=pytest.mark.slow) for case in
+                                 (("event", "periodic", "f64"), ("discrete", "walls", "f32"), ("discrete", "periodic", "f32")))])
 def test_wide_box_grid_along_y_gives_the_same_state(circles_cpu, monkeypatch, scheme, boundary, precision):
     """In a box wider than tall the grid numbers its cells along the box's y
     (`simulation.TRANSPOSE_WIDE_GRIDS`): the event queue's parts become vertical strips. Only the

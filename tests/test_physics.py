@@ -486,6 +486,7 @@ def test_speeds_spanning_six_decades(circles_cpu):
     assert worst <= 1e-9
 
 
+@pytest.mark.slow
 def test_radii_spanning_1_to_100(circles_cpu):
     """Three big circles (r = 1) among 300 small ones (r = 0.01) in a 10 x 10 walled box,
     mass proportional to radius, speed 1: the big ones must not make the broadphase miss
