@@ -36,7 +36,6 @@ import signal
 import statistics
 import sys
 import time
-import tomllib
 
 DEFAULT_OUT = "outputs/circles.mp4"
 # The showcase run, made when no scene file is given: 1500 circles of a range of sizes
@@ -201,18 +200,12 @@ def _scene_overrides(args):
 
 
 def _read_scene_file(path):
+    from .scene import read_toml
+
     try:
-        with open(path, "rb") as file:
-            data = tomllib.load(file)
-    except FileNotFoundError:
-        raise UsageError(f"scene file {path} not found") from None
-    except UnicodeDecodeError as error:
-        raise UsageError(f"{path}: not UTF-8 text (byte {error.object[error.start]:#04x} at "
-                         f"offset {error.start}): save the scene file as UTF-8") from None
-    except OSError as error:
-        raise UsageError(f"cannot read scene file {path}: {error.strerror}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise UsageError(f"{path}: not valid TOML ({error})") from None
+        data = read_toml(path)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     run = data.pop("run", {})
     if not isinstance(run, dict):
         raise UsageError(f"{path}: run must be a table [run], not {run!r}")

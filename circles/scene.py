@@ -51,13 +51,28 @@ def _choice(name, value, allowed, hint=""):
     return value
 
 
+def read_toml(path, what="scene file") -> dict:
+    """The tables of a TOML file; a ValueError of one line naming the file (`what` says what
+    kind) when it cannot be read or is not TOML."""
+    try:
+        with open(path, "rb") as file:
+            return tomllib.load(file)
+    except FileNotFoundError:
+        raise ValueError(f"{what} {path} not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{what} {path} is a folder: give a .toml file") from None
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.object[error.start]:#04x} at offset "
+                         f"{error.start}): save the {what} as UTF-8") from None
+    except OSError as error:
+        raise ValueError(f"cannot read {what} {path}: {error.strerror}") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML ({error})") from None
+
+
 def read_scene_toml(path) -> dict:
     """The top-level tables of a scene file, without its [run] table (that is for the command line)."""
-    with open(path, "rb") as f:
-        try:
-            data = tomllib.load(f)
-        except tomllib.TOMLDecodeError as e:
-            raise ValueError(f"{path}: not valid TOML ({e})") from None
+    data = read_toml(path)
     data.pop("run", None)
     return data
 

@@ -41,7 +41,6 @@ import os
 import sys
 import threading
 import time
-import tomllib
 import uuid
 from dataclasses import dataclass, field, fields
 from numbers import Integral, Real
@@ -130,20 +129,12 @@ def read_sweep(path) -> Sweep:
     """Read and check a sweep file; a SweepError of one line naming the file and the key when
     anything is refused (every point's scene is made, so a value Scene refuses is caught here,
     before any task)."""
+    from .scene import read_toml
+
     try:
-        with open(path, "rb") as file:
-            data = tomllib.load(file)
-    except FileNotFoundError:
-        raise SweepError(f"sweep file {path} not found") from None
-    except IsADirectoryError:
-        raise SweepError(f"sweep file {path} is a folder: give a .toml file") from None
-    except UnicodeDecodeError as error:
-        raise SweepError(f"{path}: not UTF-8 text (byte {error.object[error.start]:#04x} at offset "
-                         f"{error.start}): save the sweep file as UTF-8") from None
-    except OSError as error:
-        raise SweepError(f"cannot read sweep file {path}: {error.strerror}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise SweepError(f"{path}: not valid TOML ({error})") from None
+        data = read_toml(path, "sweep file")
+    except ValueError as error:
+        raise SweepError(str(error)) from None
     try:
         return sweep_from_dict(data, source=str(path))
     except ValueError as error:
