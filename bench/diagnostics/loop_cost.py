@@ -1,6 +1,6 @@
 """What a plain loop costs in Taichi's CPU code, against numpy: the floor under a step's passes.
 
-    python bench/loop_cost.py [--mb 128] [--reps 7] [--grid-n 1e6]
+    python bench/diagnostics/loop_cost.py [--mb 128] [--reps 7] [--grid-n 1e6]
 
 Copies of a float32 array larger than the cache (bytes read plus written per second, the
 median with [min, max] over `reps` runs after one that compiles): a Taichi loop on all

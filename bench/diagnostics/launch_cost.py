@@ -1,6 +1,6 @@
 """What a kernel call costs on a CPU besides its kernel: Python's work and Taichi's launch.
 
-    python bench/launch_cost.py [--calls 5000] [--runs 5]
+    python bench/diagnostics/launch_cost.py [--calls 5000] [--runs 5]
 
 Kernels that do (almost) nothing, with 1 and with 30 ndarray arguments (and two scalars), each
 called `calls` times in a row through circles' fast calls (`circles/launch.py`) and through
