@@ -14,7 +14,7 @@ each stage of a step is): a kernel of LOOPS + 1 loops over m items against one o
 loop, per further loop, with the loops run in parallel (each starts the CPU's thread pool) and
 with the loops serialized (on the calling thread), for m = 1, 1000 and 100000. The parallel
 start is what a stage pays for running on several threads (see circles.backend.SERIAL_N and
-circles.simulation.DISCRETE_PARALLEL_ROUNDS).
+circles.discrete.stepper.DISCRETE_PARALLEL_ROUNDS).
 """
 import argparse
 import statistics
