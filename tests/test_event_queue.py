@@ -291,6 +291,27 @@ def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_a_copy_carries_the_steps_that_filled_the_sum_log(circles_cpu, monkeypatch):
+    """A copy carries the event scheme's counters of work (`EventStepper.WORK_COUNTERS`), the
+    steps whose parts filled the sum log among them, and goes on as the original does (its
+    own sum log starts short again, which changes no state)."""
+    from circles.event import stepper as event_stepper
+
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "SUM_LOG_PER_CIRCLE", 0.002)
+    monkeypatch.setattr(event_stepper, "SUM_LOG_MOST_PER_CIRCLE", 0.05)
+    sim = run(circles_cpu, monkeypatch, PARTS_SCENES["walls-f64-radius"], True, steps=10)
+    copy = sim.copy()
+    assert sim._parts and sim.sum_log_full >= 1
+    assert copy.stepper.work() == sim.stepper.work()
+    sim.step(3)
+    copy.step(3)
+    assert np.array_equal(copy.state().pos, sim.state().pos)
+    assert np.array_equal(copy.state().vel, sim.state().vel)
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_equal_radii_with_masses_of_their_own_keep_the_arrays(circles_cpu, monkeypatch):
     """The event kernels take the radius and inverse mass as arguments (`event.Same`) only when
     both are one value for every circle as the kernels store them (`Simulation._same_circles`):

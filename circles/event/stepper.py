@@ -105,6 +105,9 @@ class EventStepper(Stepper):
     PART_BYTES = {"f32": 41, "f64": 57}
     #: Collisions are events at known times: this scheme can log them.
     LOGS_EVENTS = True
+    #: The counters of work that copies carry: the rounds (one queue counts one a step), bound
+    #: sweeps, steps cut short, windows run in parts, and steps whose parts filled the sum log.
+    WORK_COUNTERS = Stepper.WORK_COUNTERS + ("sum_log_full",)
 
     @staticmethod
     def default_dt(radius, vmax):
@@ -135,6 +138,8 @@ class EventStepper(Stepper):
         self.cut_steps = 0
         # Windows of steps run with the queue split into parts (see `_queue_parts_step`).
         self.parts_run = 0
+        # Steps whose parts filled the sum log, and ran from one queue (`_sum_log_full`).
+        self.sum_log_full = 0
         self._event_queue = self.uses_queue()
         # A step's two scalars on the device: the earliest event time of a round, and the time
         # of a collision that would outrun the grid (NEVER when none).
@@ -174,7 +179,6 @@ class EventStepper(Stepper):
         self._backup = {name: like(getattr(sim, name)) for name in PARTS_BACKUP_ORDER}
         self._sum_at = ti.ndarray(ti.i32, shape=1)
         self._make_sum_log(max(int(SUM_LOG_PER_CIRCLE * n), 1))
-        self.sum_log_full = 0  # steps whose parts filled the sum log (then run from one queue)
         self._touched = ti.ndarray(ti.i32, shape=n)
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
         # The split's absolute allowance on links, against round-off in the window's positions.
