@@ -10,7 +10,7 @@ tau). A round has three stages:
    by anything other than its own predicted event. A neighbour l can only touch k
    unexpectedly after l itself leaves its straight path (at min(t_l, D_l)), and then only
    once its deviation, growing at most at 2 vlim, has closed their straight-path gap:
-       D_k = min over l in the 3x3 cells of k of F_kl(min(t_l, D_l))   (see bound_sweep).
+       D_k = min over l in the 3x3 cells of k of F_kl(min(t_l, D_l))   (see rounds._bound_sweep).
    Delays add up along a chain of neighbours, so far events do not hold up near ones. The
    sweeps run from D = infinity down to the fixed point, which is unique, so D does not
    depend on the order in which threads update it.
@@ -19,20 +19,20 @@ tau). A round has three stages:
    event overall is always safe, so every round makes progress. Simultaneous safe events
    touch disjoint circles and commute, so executing them together equals any serial order.
 
-On a CPU the step runs from one queue instead (`queue_step`, below): the same events in the
+On a CPU the step runs from one queue instead (`queue.queue_step`): the same events in the
 same order with the same arithmetic, without the rounds. With several threads and one grid
 level, the circles are split into parts whose events cannot touch each other within a window
-of the step, and each part runs its own queue (`split_parts`, `queue_parts`, below).
+of the step, and each part runs its own queue (`split.split_parts`, `split.queue_parts`).
 
 Radius spread: cells as wide as the reach of the largest circles would hold hundreds of small
 circles when a few circles are much larger. In a walled box with a few large circles (see
 simulation.LARGE_RADIUS_RATIO) the queue's grid has two levels: fine cells sized for the small
 circles, and coarse cells, blocks of fine cells as wide as the reach of two large circles,
-that list the large circles only (`build_coarse`). A small circle meets the small ones in its
-3 x 3 fine cells and the large ones in its 3 x 3 coarse cells; a large circle meets the small
-ones in the block of fine cells its reach spans and the large ones in its coarse cells
-(`_runs`). Every pair that can collide in the step is met from both of its circles, as with
-one level, so the state is the same bit for bit.
+that list the large circles only (`two_level.build_coarse`). A small circle meets the small
+ones in its 3 x 3 fine cells and the large ones in its 3 x 3 coarse cells; a large circle
+meets the small ones in the block of fine cells its reach spans and the large ones in its
+coarse cells (`two_level._runs`). Every pair that can collide in the step is met from both of
+its circles, as with one level, so the state is the same bit for bit.
 
 The grid and the bounds assume every speed stays below vlim during the step. A collision
 that would exceed it (a light circle hit by a heavy one) ends the step at its time: the
