@@ -639,7 +639,7 @@ class Simulation:
 
     @classmethod
     def _from_fields(cls, d, scene=None, extras=None, record_events=0) -> "Simulation":
-        """A simulation in the state `_fields` (or a file, `_read_saved`) gives, with `extras`
+        """A simulation in the state `_fields` (or a file, `storage.read_saved`) gives, with `extras`
         (`_extras`) when given, else with a new event log of `record_events` collisions."""
         ensure_init()
         extras = extras or {}
