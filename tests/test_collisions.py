@@ -344,15 +344,14 @@ def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):
 
 
 def run_with_flag(circles, monkeypatch, scene, flag, steps, check, values=(True, False), module=None):
-    """The discrete `scene` run `steps` single steps with `<module>.<flag>` (circles.simulation
+    """The discrete `scene` run `steps` single steps with `<module>.<flag>` (circles.discrete.stepper
     by default) at each of two `values`: a (state, stats, crowded) for each, crowded summing
     over the steps the circles whose contact list overflowed (they search their cells).
     `check(sim, value)` looks at each new Simulation."""
-    from circles import simulation
     from circles.discrete import stepper as discrete_stepper
     runs = []
     for value in values:
-        monkeypatch.setattr(module or simulation, flag, value)
+        monkeypatch.setattr(module or discrete_stepper, flag, value)
         sim = circles.Simulation(scene)
         check(sim, value)
         crowded = 0
@@ -559,7 +558,7 @@ def test_discrete_steps_at_once_stop_where_the_clock_stops_counting(circles_cpu,
     from time 2^24 - 5.5 dt (dt = 0.001), the clock counts the steps before 2^24 to within
     2^-20 of dt (float64's unit there is 2^-29, below 2^-20 dt) and not the first after it
     (2^-28), so step(10) takes those steps and then refuses with the clock's message, with
-    `simulation.DISCRETE_STEPS_AT_ONCE` at 16 as at 1: the same steps, time and state."""
+    `circles.discrete.stepper.DISCRETE_STEPS_AT_ONCE` at 16 as at 1: the same steps, time and state."""
     from circles.discrete import stepper as discrete_stepper
 
     runs = []
