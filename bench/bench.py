@@ -160,7 +160,7 @@ def cpu_model():
 def cpu_details():
     """' (family F, model M, L2 ..., L3 ...)': the CPU's family and model and its caches (one
     core's L2, the L3), as Linux reports them, since hosts sold under one model name differ
-    (see bench/PERFORMANCE.md); '' where none is known."""
+    (see the Performance page of the docs); '' where none is known."""
     info = cpu_info()
     parts = [f"{key.split()[-1]} {info[key]}" for key in ("cpu family", "model") if info.get(key)]
     for index in (2, 3):

@@ -4,7 +4,7 @@
 # against the serial reference, the physics and conservation tests, the collision cases), then
 # the GPU benchmark's throughput rows (10^4 to 10^8 circles, f32; `bench/bench.py --arch gpu`,
 # placement and radius-spread sections left out), then where an event step's time goes at 10^7
-# circles (`bench/kernel_profile.py --arch gpu --scheme event`: each task's share, and the rounds
+# circles (`bench/diagnostics/kernel_profile.py --arch gpu --scheme event`: each task's share, and the rounds
 # and bound sweeps a step). A check stopped by its limit keeps what it wrote: the tests' log, the
 # benchmark's log (each row as it is measured, copied into the summary), the tables of the
 # sections it finished (it rewrites them after every section) and the profile's log.
@@ -46,7 +46,7 @@ timeout "$bench_s" "$python" bench/bench.py --arch "$arch" --skip placement,spre
 echo "bench: exit $?" >> "$summary"
 grep -E "circle-steps/s" "$out/bench.log" | tail -n 20 >> "$summary"
 
-timeout "$profile_s" "$python" bench/kernel_profile.py --arch "$arch" --n "$profile_n" --scheme event --steps 5 \
+timeout "$profile_s" "$python" bench/diagnostics/kernel_profile.py --arch "$arch" --n "$profile_n" --scheme event --steps 5 \
   --warm 10 > "$out/profile.log" 2>&1
 echo "profile: exit $?" >> "$summary"
 grep -E "circle-steps/s|per step|%" "$out/profile.log" | head -n 24 >> "$summary"

@@ -20,7 +20,7 @@ __all__ = ["init", "Scene", "Simulation", "State"]
 __version__ = "0.1.0"
 
 #: Where each public name lives.
-_HOMES = {"init": "backend", "Scene": "scene", "Simulation": "simulation", "State": "simulation"}
+_HOMES = {"init": "backend", "Scene": "scene", "Simulation": "simulation", "State": "state"}
 
 
 def __getattr__(name):

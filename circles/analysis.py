@@ -8,17 +8,16 @@ kT the kinetic energy per disk (two degrees of freedom), mass m:
 
 - pressure from the pair distribution at contact (the virial theorem for hard disks):
   ``Z = P A / (N kT) = 1 + 2 eta g(sigma+)``;
-- Enskog's collision frequency, ``omega_E = 2 n sigma g(sigma+) sqrt(pi kT / m)``, and
-  self-diffusion coefficient, ``D_E = sqrt(pi kT / m) / (2 n sigma g(sigma+))``: the first
-  Chapman-Enskog approximation for hard disks (D. M. Gass, J. Chem. Phys. 54, 1898 (1971);
-  Enskog's factor 1 / g(sigma+) on the Boltzmann gas's value). In two dimensions the velocity
-  autocorrelation's long-time tail (Alder and Wainwright, Phys. Rev. A 1, 18 (1970)) makes
-  the measured D drift up slowly with time, so the ratio D / D_E is a number near one, not a
-  constant.
+- Enskog's collision frequency and self-diffusion coefficient (`circles.theory`). In two
+  dimensions the velocity autocorrelation's long-time tail (Alder and Wainwright, Phys. Rev.
+  A 1, 18 (1970)) makes the measured D drift up slowly with time, so the ratio D / D_E is a
+  number near one, not a constant.
 """
 import math
 
 import numpy as np
+
+from .theory import enskog_collision_rate, enskog_diffusion, henderson_compressibility  # noqa: F401
 
 
 def mean_error(values):
@@ -59,19 +58,3 @@ def squared_displacements(frames, origins=None):
     lags = np.arange(1, count)
     msd = np.array([np.mean(np.sum((positions[lag:] - positions[:-lag]) ** 2, axis=2)) for lag in lags])
     return lags, msd
-
-
-def enskog_collision_rate(density, sigma, contact, kT, mass):
-    """omega_E = 2 n sigma g(sigma+) sqrt(pi kT / m): collisions a disk takes part in per unit time."""
-    return 2.0 * density * sigma * contact * math.sqrt(math.pi * kT / mass)
-
-
-def enskog_diffusion(density, sigma, contact, kT, mass):
-    """D_E = sqrt(kT / (pi m)) / (2 n sigma g(sigma+)) (Gass 1971; see the module)."""
-    return math.sqrt(kT / (math.pi * mass)) / (2.0 * density * sigma * contact)
-
-
-def henderson_compressibility(eta):
-    """Henderson's equation of state for hard disks, Z = (1 + eta^2 / 8) / (1 - eta)^2 (Mol.
-    Phys. 30, 971 (1975)): within about 1% of simulations up to eta = 0.6, a reference only."""
-    return (1.0 + eta * eta / 8.0) / (1.0 - eta) ** 2

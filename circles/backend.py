@@ -5,6 +5,7 @@ import contextlib
 import difflib
 import io
 import math
+from pathlib import Path
 
 import taichi as ti
 
@@ -158,21 +159,15 @@ def runtime() -> int:
 #: loop on the CPU's thread pool costs tens of microseconds, and the pool's start and the
 #: waits between a step's stages cost more than the second thread saves on a small scene. A
 #: discrete step on several threads runs as one team (one start of the pool a step,
-#: `circles.team`); against one thread, on an Intel host (2 cores, `python bench/versus.py
-#: --base 10187b9 --n 3000 10000 30000 70000 --scheme discrete --warm 40 --rounds 4 --steps
-#: 400`, this limit at 0 against 70000 there): 0.411, 0.628, 0.999 and 1.321 times as fast at
-#: 3e3, 1e4, 3e4 and 7e4 circles. (Before the team, with a pool start for each of the step's
-#: 13 loops, the limit was 70000: one thread 1.76, 1.37 and 1.22 times as fast at 3e4, 5e4
-#: and 7e4 circles on this project's AMD host.)
+#: `circles.team`), which overtakes one thread near this size (the Performance page of the
+#: docs gives the measurements).
 SERIAL_N = 30_000
 #: The event scheme's limit, as circles times the CPU's threads: up to it, a step runs on one
 #: thread from one queue (`event.queue_step`, each pair's first time computed once) rather
 #: than in parts on every thread (`event.queue_parts`). The parts pay for their split, their
-#: windows and a dozen launches a step, a few milliseconds. On this project's 2-core machine
-#: (`bench/versus.py --interleave`, the bench scene after 40 steps, the same pairs and energy)
-#: one queue ran 1.91, 1.57 and 1.36 times as fast as the parts at 3e4, 5e4 and 1e5 circles,
-#: 1.02 at 1.5e5 and 0.83 at 2e5 and 3e5. More threads share that fixed cost among more
-#: parts, hence the product. With one thread there are no parts: always one queue.
+#: windows and a dozen launches a step, a few milliseconds, which on two threads the parts
+#: win back from about 1.5e5 circles. More threads share that fixed cost among more parts,
+#: hence the product. With one thread there are no parts: always one queue.
 EVENT_SERIAL_WORK = 200_000
 
 
@@ -190,3 +185,34 @@ def serial_loops(n: int, scheme: str = "discrete") -> bool:
         threads = cpu_threads()
         return n <= SERIAL_N or threads < 2 or n * threads <= EVENT_SERIAL_WORK
     return n <= SERIAL_N
+
+
+#: Where Linux says how much memory this process may still take: the system's MemAvailable,
+#: and the limit and use of a control group (version 2 and version 1), relative to the root.
+_MEMINFO = "proc/meminfo"
+_CGROUP_LIMITS = (("sys/fs/cgroup/memory.max", "sys/fs/cgroup/memory.current"),
+                  ("sys/fs/cgroup/memory/memory.limit_in_bytes", "sys/fs/cgroup/memory/memory.usage_in_bytes"))
+
+
+def available_memory(root="/") -> int | None:
+    """Bytes of memory this process can take now, or None where the system does not say: the
+    system's MemAvailable, or less when the process runs in a control group (a container)
+    whose limit leaves less (the least of what each says)."""
+    root = Path(root)
+    available = None
+    try:
+        for line in (root / _MEMINFO).read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                available = int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    for limit_path, usage_path in _CGROUP_LIMITS:
+        try:
+            limit = int((root / limit_path).read_text().split()[0])  # "max" (no limit) is not a number
+            usage = int((root / usage_path).read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            continue
+        if limit < 1 << 60:  # version 1 writes a number near 2^63 for no limit
+            left = max(limit - usage, 0)
+            available = left if available is None else min(available, left)
+    return available

@@ -809,7 +809,7 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
     vel = _float_array("vel", vel, (2,), n)
     if check:
         _check_circles(pos, vel, radius, n)
-        from .simulation import check_colors
+        from .inputs import check_colors
 
         color = check_colors(color, n)
     else:

@@ -4,8 +4,7 @@ A Taichi kernel call does its work in Python before the launch: it derives the t
 every argument (each ndarray's element type, dimension and gradient) to look up the compiled
 kernel, then makes a launch context and sets every argument in it one by one (a few
 microseconds each). With the 20 to 40 arguments of a step's kernels that costs about 0.4 ms
-a call on a CPU (measured: 499 us a call of the discrete scheme's `begin_step` at N = 300,
-whose kernel runs for 18 us), which was most of a step for a few thousand circles.
+a call on a CPU, many times the kernel's own run for a few thousand circles.
 
 `kernel` makes a Taichi kernel whose calls on a CPU skip that work:
 - the first call with a new combination of template values and array types goes through

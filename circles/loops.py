@@ -2,15 +2,12 @@
 
 Taichi reloads an array's address from the kernel's arguments at every access (it cannot tell
 that a store leaves the arguments alone), a load that follows a store waits for it, and a
-loop that stores one item per iteration runs far below the memory's speed.
-`python bench/loop_cost.py` (a float32 copy of 128 MB, GB/s read plus written, on this
-project's 2-core machine, 2026-11-24 06:02 UTC): Taichi's plain loop 5.35 on two threads and
-2.1 on one; `each` taking 8 items per iteration 9.0 and 4.1, taking 16 11.9 and 5.8; numpy
-23.8 on one thread. The reorder's gathers use `each` and the cell starts take `unroll()`
-cells per iteration; the grid's count and scatter take their items' loads before their
-stores (`grid.enter_cells`); passes whose
-items do much more work than a copy measured no faster or slower (the overlap search, the
-first round's pick and resolve) and keep plain loops. On a GPU consecutive threads must
+loop that stores one item per iteration runs far below the memory's speed
+(`bench/diagnostics/loop_cost.py` measures it). Taking several items per iteration, their loads
+before their stores, comes closer. The reorder's gathers use `each` and the cell starts take
+`unroll()` cells per iteration; the grid's count and scatter take their items' loads before
+their stores (`grid.enter_cells`); passes whose items do much more work than a copy (the
+overlap search, the first round's pick and resolve) gain nothing and keep plain loops. On a GPU consecutive threads must
 take consecutive items (coalesced loads), so there a loop takes one item per iteration.
 """
 import taichi as ti

@@ -1,9 +1,9 @@
 """A step's stages on a CPU's threads inside one parallel loop: a team.
 
 Each top-level loop of a Taichi kernel is a task of its own, and on a CPU a parallel task
-starts the thread pool: its threads sleep between tasks, and waking them costs 15 to 25
-microseconds on one host and 50 to 55 on another (`python bench/launch_cost.py`), even for a
-loop with nothing to do. A discrete step runs more than a dozen such loops, which on a scene
+starts the thread pool: its threads sleep between tasks, and waking them costs tens of
+microseconds (`bench/diagnostics/launch_cost.py` measures it), even for a loop with nothing
+to do. A discrete step runs more than a dozen such loops, which on a scene
 of 1e5 circles is a fifth of the step or more.
 
 A team kernel starts the pool once: one parallel loop with one iteration per thread (a

@@ -344,20 +344,20 @@ def test_discrete_step_reads_no_pick_it_did_not_write(circles_cpu):
 
 
 def run_with_flag(circles, monkeypatch, scene, flag, steps, check, values=(True, False), module=None):
-    """The discrete `scene` run `steps` single steps with `<module>.<flag>` (circles.simulation
+    """The discrete `scene` run `steps` single steps with `<module>.<flag>` (circles.discrete.stepper
     by default) at each of two `values`: a (state, stats, crowded) for each, crowded summing
     over the steps the circles whose contact list overflowed (they search their cells).
     `check(sim, value)` looks at each new Simulation."""
-    from circles import simulation
+    from circles.discrete import stepper as discrete_stepper
     runs = []
     for value in values:
-        monkeypatch.setattr(module or simulation, flag, value)
+        monkeypatch.setattr(module or discrete_stepper, flag, value)
         sim = circles.Simulation(scene)
         check(sim, value)
         crowded = 0
         for _ in range(steps):
             sim.step(1)
-            crowded += int((sim._n_contacts.to_numpy() > simulation.DISCRETE_CONTACTS).sum())
+            crowded += int((sim._n_contacts.to_numpy() > discrete_stepper.DISCRETE_CONTACTS).sum())
         runs.append((sim.state(), sim.stats(), crowded))
     return runs
 
@@ -426,11 +426,12 @@ def test_discrete_first_round_in_parts_equals_every_circle(circles_cpu, monkeypa
     every circle that a GPU runs, on a dense, fast scene of mixed radii run with parallel loops
     (backend.SERIAL_N at 0): isolated pairs, circles with several overlaps, contact lists that
     overflow into cell searches, and walls."""
-    from circles import backend, grid, simulation
+    from circles import backend, grid
+    from circles.discrete import stepper as discrete_stepper
     if grid.count_parts() < 2:
         pytest.skip("one CPU thread (or a GPU): the first round has no parts")
     monkeypatch.setattr(backend, "SERIAL_N", 0)
-    monkeypatch.setattr(simulation, "DISCRETE_TEAM", False)  # the team always runs the first round in parts
+    monkeypatch.setattr(discrete_stepper, "DISCRETE_TEAM", False)  # the team always runs the first round in parts
     scene = circles_cpu.Scene(n=3000, box=(1.0, 1.0), radius=(0.005, 0.009), speed=(2.0, 6.0), scheme="discrete",
                               precision="f32", seed=5, dt=0.002, boundary=boundary)
 
@@ -451,7 +452,8 @@ def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
     isolated pairs, circles with several overlaps, contact lists that overflow into cell
     searches, walls. And with the team's members run one after another on one thread (the
     first does every chunk, the others find them done), again the same state."""
-    from circles import backend, grid, simulation
+    from circles import backend, grid
+    from circles.discrete import stepper as discrete_stepper
     if grid.count_parts() < 2:
         pytest.skip("one CPU thread (or a GPU): no team")
     monkeypatch.setattr(backend, "SERIAL_N", 0)
@@ -463,7 +465,7 @@ def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
 
     runs = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_TEAM", 40, check)
     assert_runs_equal(runs, boundary, pairs=10000, walls=500)
-    monkeypatch.setattr(simulation, "DISCRETE_TEAM_SERIAL", True)
+    monkeypatch.setattr(discrete_stepper, "DISCRETE_TEAM_SERIAL", True)
     one = run_with_flag(circles_cpu, monkeypatch, scene, "DISCRETE_TEAM", 40, check, values=(True,))
     assert_runs_equal([runs[0], one[0]], boundary, pairs=10000, walls=500)
 
@@ -472,7 +474,8 @@ def test_discrete_team_equals_loops(circles_cpu, monkeypatch, boundary):
 def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch):
     """The team step (see above) on a two-level grid, whose large circles search their blocks
     in a stage of their own: the state of the step's loops, bit for bit."""
-    from circles import backend, grid, simulation
+    from circles import backend, grid
+    from circles.discrete import stepper as discrete_stepper
     from physics_util import two_size_mixture
     if grid.count_parts() < 2:
         pytest.skip("one CPU thread (or a GPU): no team")
@@ -480,7 +483,7 @@ def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch
     pos, vel, radius, box = two_size_mixture("f32")
     out = []
     for team in (True, False):
-        monkeypatch.setattr(simulation, "DISCRETE_TEAM", team)
+        monkeypatch.setattr(discrete_stepper, "DISCRETE_TEAM", team)
         sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme="discrete",
                                                  precision="f32", dt=0.02)
         assert sim._team == team and sim._two_level
@@ -497,14 +500,15 @@ def test_discrete_team_equals_loops_on_a_two_level_grid(circles_cpu, monkeypatch
                                                 for name in ("periodic-f32", "walls-f64-dense", "two-level-f32"))])
 def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, name):
     """Where a discrete step runs on one thread, `step(k)` and `advance` run up to
-    simulation.DISCRETE_STEPS_AT_ONCE steps in one launch (`discrete.serial_steps`), a batch
+    circles.discrete.stepper.DISCRETE_STEPS_AT_ONCE steps in one launch (`discrete.serial_steps`), a batch
     ending early at a step whose fused rounds did not settle, which the host finishes with
     more rounds (and, at the round limit, the walls). The run must be the one of a launch a
     step bit for bit: state, counts, sums, clock, steps and rounds, over steps that cross the
     reorders (every simulation.REORDER_EVERY steps) and an advance that ends in a part step.
     Scenes: fast enough that some steps need more rounds than the fused ones (every step, in
     the dense one), a periodic box, float64, and a two-level grid."""
-    from circles import discrete, simulation
+    from circles.discrete import rounds as discrete
+    from circles.discrete import stepper as discrete_stepper
     from physics_util import two_size_mixture
 
     def make():
@@ -520,8 +524,8 @@ def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, na
 
     launches = []
     runs = []
-    for at_once in (simulation.DISCRETE_STEPS_AT_ONCE, 1):
-        monkeypatch.setattr(simulation, "DISCRETE_STEPS_AT_ONCE", at_once)
+    for at_once in (discrete_stepper.DISCRETE_STEPS_AT_ONCE, 1):
+        monkeypatch.setattr(discrete_stepper, "DISCRETE_STEPS_AT_ONCE", at_once)
         calls = []
         kernel = discrete.serial_steps
 
@@ -545,10 +549,10 @@ def test_discrete_steps_at_once_equal_one_at_a_time(circles_cpu, monkeypatch, na
     if name != "periodic-f32":
         assert st_a["wall_collisions"] > 50
     # Some steps needed more rounds than the fused ones; a launch a step made none in batches.
-    assert rounds > simulation.DISCRETE_FUSED_ROUNDS * steps
+    assert rounds > discrete_stepper.DISCRETE_FUSED_ROUNDS * steps
     assert launches[1] == 0
     if name == "walls-f64-dense":
-        assert rounds == simulation.DISCRETE_MAX_ROUNDS * steps  # every step: a batch of one
+        assert rounds == discrete_stepper.DISCRETE_MAX_ROUNDS * steps  # every step: a batch of one
     else:
         assert 0 < launches[0] <= steps // 3
 
@@ -559,12 +563,12 @@ def test_discrete_steps_at_once_stop_where_the_clock_stops_counting(circles_cpu,
     from time 2^24 - 5.5 dt (dt = 0.001), the clock counts the steps before 2^24 to within
     2^-20 of dt (float64's unit there is 2^-29, below 2^-20 dt) and not the first after it
     (2^-28), so step(10) takes those steps and then refuses with the clock's message, with
-    `simulation.DISCRETE_STEPS_AT_ONCE` at 16 as at 1: the same steps, time and state."""
-    from circles import simulation
+    `circles.discrete.stepper.DISCRETE_STEPS_AT_ONCE` at 16 as at 1: the same steps, time and state."""
+    from circles.discrete import stepper as discrete_stepper
 
     runs = []
     for at_once in (16, 1):
-        monkeypatch.setattr(simulation, "DISCRETE_STEPS_AT_ONCE", at_once)
+        monkeypatch.setattr(discrete_stepper, "DISCRETE_STEPS_AT_ONCE", at_once)
         sim = circles_cpu.Simulation(circles_cpu.Scene(n=500, box=(10.0, 10.0), radius=0.1, scheme="discrete",
                                                        seed=2, dt=0.001))
         assert sim._steps_at_once == at_once

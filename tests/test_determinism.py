@@ -368,7 +368,8 @@ INTERRUPTED = """
 import os, signal, sys
 import numpy as np
 import circles
-from circles import discrete, event
+from circles.discrete import rounds as discrete
+from circles.event import queue as event
 circles.init(arch="cpu")
 # Python's own handler, which raises KeyboardInterrupt: a process started in the background
 # by a shell inherits SIGINT ignored, and Python then leaves it so.

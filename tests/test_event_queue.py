@@ -1,5 +1,5 @@
 """The event scheme's two executions agree bit for bit: rounds with causal bounds (the GPU's)
-and one queue of events (the CPU's, `simulation.EVENT_QUEUE_ON_CPU`).
+and one queue of events (the CPU's, `circles.event.stepper.EVENT_QUEUE_ON_CPU`).
 
 Both execute the same collisions in the same order with the same arithmetic per event, and
 independent events touch disjoint circles, so the states must be equal exactly, not to a
@@ -82,8 +82,8 @@ def assert_same_as_rounds(rounds, sim, keys=("pair_collisions",)):
 
 
 def run(circles, monkeypatch, scene, queue, steps=25):
-    from circles import simulation
-    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+    from circles.event import stepper as event_stepper
+    monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
     sim = circles.Simulation(circles.Scene(scheme="event", seed=3, **scene), record_events=100_000)
     assert sim._event_queue == (queue and TEST_ARCH == "cpu")
     sim.step(steps)
@@ -125,13 +125,13 @@ def test_a_neighbour_that_turns_back_bounds_the_rounds(circles_cpu, monkeypatch,
     l as if it kept its course. A bound on when a neighbour can reach a circle must let the
     neighbour's velocity reverse (deviate at 2 vlim, not vlim). Times held to 1e-12 (a few
     roundings of numbers near 1); on a CPU the rounds must also equal the queue bit for bit."""
-    from circles import simulation
+    from circles.event import stepper as event_stepper
 
     if queue and TEST_ARCH != "cpu":
         pytest.skip("the queue runs on a CPU only")
 
     def run(on_queue):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", on_queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", on_queue)
         sim = circles_cpu.Simulation.from_arrays(
             np.array([[0.3, 5.0], [1.5, 5.0], [2.0482050807568877, 5.1]]),
             np.array([[-1.0, 0.0], [-1.0, 0.0], [-1.5, 0.0]]), np.full(3, 0.1), mass="equal", box=(20.0, 10.0),
@@ -188,17 +188,17 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     claims at all every split fails, and the steps fall back to one queue for all circles.
     Scenes of equal circles run the parts with the radius and inverse mass as the queue's
     arguments (`event.Same`), the others with their arrays, as the rounds do."""
-    from circles import event, simulation
+    from circles.event import stepper as event_stepper
 
     rounds = run(circles_cpu, monkeypatch, PARTS_SCENES[name], False)
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 200)
-    monkeypatch.setattr(simulation, "PART_CLAIMS", claims)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "PART_CLAIMS", claims)
     # The windows a step in parts had run when it met a cut (its restore).
     runs_at_cuts = []
     step_start = [0]
-    parts_step = simulation.Simulation._queue_parts_step
-    restore = simulation.Simulation._restore
+    parts_step = event_stepper.EventStepper._queue_parts_step
+    restore = event_stepper.EventStepper._restore
 
     def counted_step(self, *args):
         step_start[0] = self.parts_run
@@ -208,8 +208,8 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
         runs_at_cuts.append(self.parts_run - step_start[0])
         return restore(self, *args, **kwargs)
 
-    monkeypatch.setattr(simulation.Simulation, "_queue_parts_step", counted_step)
-    monkeypatch.setattr(simulation.Simulation, "_restore", counted_restore)
+    monkeypatch.setattr(event_stepper.EventStepper, "_queue_parts_step", counted_step)
+    monkeypatch.setattr(event_stepper.EventStepper, "_restore", counted_restore)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim._part_shape()[0] >= 4
     assert (sim._same is not None) == np.isscalar(PARTS_SCENES[name]["radius"])
@@ -217,7 +217,7 @@ def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
     if claims in (4, 16):
         assert sim.parts_run >= sim.steps  # every step ran in parts, one window or more
     else:
-        assert sim.parts_run == 0 and sim._windows == simulation.MOST_WINDOWS
+        assert sim.parts_run == 0 and sim._windows == event_stepper.MOST_WINDOWS
     if name == "walls-f32-equal" and claims == 4:
         assert sim._windows > 1
     assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
@@ -242,12 +242,13 @@ def test_queue_finish_measures_the_next_steps_speed(circles_cpu, monkeypatch, na
     next step starts and when the state is loaded anew. One queue on one thread also leaves no
     event held (`event.queue_step`: its next first predictions take the walls in the pairs'
     pass)."""
-    from circles import event, reductions
+    from circles import reductions
+    from circles.event import stepper as event_stepper
     from circles.geometry import NEVER, NO_EVENT
 
     if parts:
         on_threads(monkeypatch)
-        monkeypatch.setattr(event, "PART_CIRCLES", 200)
+        monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
     sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **PARTS_SCENES[name]))
     if parts and not sim._parts:
         pytest.skip("one thread: no parts")
@@ -277,13 +278,13 @@ def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
     the log dropped) and runs from one queue, and the log doubles for later steps: the state,
     the sums and the event log still equal the rounds' bit for bit. The scene with radii has
     steps cut short too (their redo drops the log of the windows it ran)."""
-    from circles import event, simulation
+    from circles.event import stepper as event_stepper
 
     rounds = run(circles_cpu, monkeypatch, PARTS_SCENES[name], False)
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 200)
-    monkeypatch.setattr(simulation, "SUM_LOG_PER_CIRCLE", 0.002)  # 3 entries for 1500 circles
-    monkeypatch.setattr(simulation, "SUM_LOG_MOST_PER_CIRCLE", 0.05)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "SUM_LOG_PER_CIRCLE", 0.002)  # 3 entries for 1500 circles
+    monkeypatch.setattr(event_stepper, "SUM_LOG_MOST_PER_CIRCLE", 0.05)
     sim = run(circles_cpu, monkeypatch, PARTS_SCENES[name], True)
     assert sim._parts and sim.parts_run > 0
     assert sim.sum_log_full >= 2  # filled again after it first grew
@@ -295,20 +296,41 @@ def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
+def test_a_copy_carries_the_steps_that_filled_the_sum_log(circles_cpu, monkeypatch):
+    """A copy carries the event scheme's counters of work (`EventStepper.WORK_COUNTERS`), the
+    steps whose parts filled the sum log among them, and goes on as the original does (its
+    own sum log starts short again, which changes no state)."""
+    from circles.event import stepper as event_stepper
+
+    on_threads(monkeypatch)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "SUM_LOG_PER_CIRCLE", 0.002)
+    monkeypatch.setattr(event_stepper, "SUM_LOG_MOST_PER_CIRCLE", 0.05)
+    sim = run(circles_cpu, monkeypatch, PARTS_SCENES["walls-f64-radius"], True, steps=10)
+    copy = sim.copy()
+    assert sim._parts and sim.sum_log_full >= 1
+    assert copy.stepper.work() == sim.stepper.work()
+    sim.step(3)
+    copy.step(3)
+    assert np.array_equal(copy.state().pos, sim.state().pos)
+    assert np.array_equal(copy.state().vel, sim.state().vel)
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_equal_radii_with_masses_of_their_own_keep_the_arrays(circles_cpu, monkeypatch):
     """The event kernels take the radius and inverse mass as arguments (`event.Same`) only when
     both are one value for every circle as the kernels store them (`Simulation._same_circles`):
     circles of one radius with masses given one by one keep the arrays, and their queue in
     parts still equals the rounds bit for bit; with one mass for all they take the arguments,
     the values the arrays would hold."""
-    from circles import event, simulation
+    from circles.event import stepper as event_stepper
 
     scene = PARTS_SCENES["walls-f32-equal"]
     start = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene)).state()
     mass = np.random.default_rng(5).uniform(0.5, 2.0, scene["n"])
 
     def run_own(queue, masses):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
         sim = circles_cpu.Simulation.from_arrays(start.pos, start.vel, scene["radius"], masses, box=scene["box"],
                                                  precision="f32", record_events=100_000)
         sim.step(25)
@@ -316,7 +338,7 @@ def test_equal_radii_with_masses_of_their_own_keep_the_arrays(circles_cpu, monke
 
     rounds = run_own(False, mass)
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
     sim = run_own(True, mass)
     assert sim._parts and sim.parts_run > 0 and sim._same is None
     assert_same_as_rounds(rounds, sim, ("pair_collisions", "wall_collisions", "virial", "wall_impulse"))
@@ -335,12 +357,12 @@ def test_one_queue_of_a_small_scene_after_failed_splits_equals_rounds(circles_cp
     calendar then uses the parts' array of bucket heads, longer than the circles are many.
     Every bucket must start empty (stale lists from an earlier step once gave wrong events and
     crashes), and the state and events must equal the rounds' bit for bit."""
-    from circles import simulation
+    from circles.event import stepper as event_stepper
 
     scene = dict(n=400, box=(0.164, 0.164), radius=0.004, speed=(0.5, 1.0), boundary="walls", precision="f64")
     rounds = run(circles_cpu, monkeypatch, scene, False, steps=6)
     on_threads(monkeypatch)
-    monkeypatch.setattr(simulation, "PART_CLAIMS", 10**9)
+    monkeypatch.setattr(event_stepper, "PART_CLAIMS", 10**9)
     sim = run(circles_cpu, monkeypatch, scene, True, steps=6)
     if sim._head.shape[0] <= sim.n:
         pytest.skip("one thread: no parts' calendar")
@@ -354,7 +376,7 @@ def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
     """A split into parts (`Simulation._part_shape`) asks for a multiple of the threads, so that
     they finish their shares together: one part more than the threads' count of PART_CIRCLES
     rounds up to twice the threads, on a grid with rows enough for that."""
-    from circles import event
+    from circles.event import stepper as event_stepper
     from circles.grid import count_parts
 
     threads = count_parts()
@@ -362,10 +384,10 @@ def test_parts_come_in_multiples_of_the_threads(circles_cpu, monkeypatch):
         pytest.skip("one thread: no parts")
     on_threads(monkeypatch)
     scene = SCENES["walls-f32-equal"]
-    monkeypatch.setattr(event, "PART_CIRCLES", scene["n"] // (threads + 1))
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", scene["n"] // (threads + 1))
     sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene))
     sim.step(1)
-    assert sim._parts and sim.grid.ncy // event.PART_MIN_ROWS >= 2 * threads
+    assert sim._parts and sim.grid.ncy // event_stepper.PART_MIN_ROWS >= 2 * threads
     parts, rows = sim._part_shape()
     assert parts == 2 * threads and rows * (parts - 1) < sim.grid.ncy <= rows * parts
 
@@ -386,11 +408,12 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     one queue for all circles, has no collision between two parts. The split also clears every
     circle's flags of the window's searches (touched, dirty)."""
     from circles import event, reductions
+    from circles.event import stepper as event_stepper
     from circles.geometry import spans
-    from circles.simulation import SPEED_MARGIN
+    from circles.event.stepper import SPEED_MARGIN
 
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 300)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 300)
     n, box = 4000, np.array([1.0, 1.0])
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=tuple(box), radius=0.005, speed=(0.0, 1.0),
                                                    boundary=boundary, scheme="event", precision="f64", seed=2),
@@ -456,7 +479,7 @@ def test_split_keeps_linked_circles_in_one_part(circles_cpu, monkeypatch, bounda
     assert np.array_equal(np.sort(np.concatenate(members)), np.arange(n))
     # The window from one queue for all circles (`_split_wait`: no split for a while).
     start, logged = sim.time, len(sim.events())
-    sim._split_wait = 10
+    sim.stepper._split_wait = 10
     sim.advance(window)
     ev = sim.events()
     ev = ev[(ev[:, 2] >= 0) & (ev[:, 0] > start)]  # pair collisions in the window
@@ -501,11 +524,11 @@ def test_queue_calendar_any_bucket_width(circles_cpu, monkeypatch, scene):
     hands out the events in key order, so the states and event logs equal the rounds' bit for
     bit: on a lattice whose events come hundreds at one instant, ordered by ids alone, and on
     two scenes of the suite (one with steps cut short)."""
-    from circles import event, simulation
+    from circles.event import stepper as event_stepper
 
     def make(queue, per_bucket):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
-        monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", per_bucket)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "QUEUE_BUCKET_CIRCLES", per_bucket)
         if scene == "lattice":
             pos, vel, radius, box = lattice_head_on()
             sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, box=box, scheme="event", precision="f64",
@@ -538,7 +561,7 @@ def test_queue_step_of_1e_36_with_touching_pairs(circles_cpu, monkeypatch, preci
     bucket of time t is t * 400 / 1e-36, past float32's range (event._bucket works in float64
     and clamps). Every pair collides in that step, and the queue equals the rounds bit for
     bit, then and after 3 more steps."""
-    from circles import simulation
+    from circles.event import stepper as event_stepper
 
     k, row = (a.ravel() for a in np.meshgrid(np.arange(20), np.arange(40)))
     x = (4 * k + 1) / 16.0
@@ -547,7 +570,7 @@ def test_queue_step_of_1e_36_with_touching_pairs(circles_cpu, monkeypatch, preci
     vel = np.concatenate([np.tile([0.5, 0.0], (800, 1)), np.tile([-0.5, 0.0], (800, 1))])
     runs = []
     for queue in (True, False):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
         sim = circles_cpu.Simulation.from_arrays(pos, vel, np.full(1600, 1 / 32), box=(5.0, 5.0), scheme="event",
                                                  precision=precision)
         assert sim._head.shape[0] == (400 if queue else 1)
@@ -567,17 +590,18 @@ def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypa
     the walls), moving at +0.5, 0, -0.5: no circle can move, so the collisions at time 0 never
     end. The step stops after `event.most_events` events (MOST_EVENTS_PER_CIRCLE a circle, at
     least MOST_EVENTS_ANY_STEP) with an error that names the limit and the way out, instead of running for ever: on the queue (a CPU), and in
-    the rounds (a GPU's execution), which count their events from simulation.JAM_CHECK_ROUNDS
+    the rounds (a GPU's execution), which count their events from circles.event.stepper.JAM_CHECK_ROUNDS
     rounds on."""
-    from circles import event, simulation
+    from circles import event
+    from circles.event import stepper as event_stepper
 
     if queue and TEST_ARCH != "cpu":
         pytest.skip("the queue runs on a CPU only")
-    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+    monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
     # Both read the limit at every step (`event.most_events`): a lower one keeps the test short
     # (each round executes a few of the jam's events).
-    monkeypatch.setattr(event, "MOST_EVENTS_PER_CIRCLE", 100)
-    monkeypatch.setattr(event, "MOST_EVENTS_ANY_STEP", 100)
+    monkeypatch.setattr(event_stepper, "MOST_EVENTS_PER_CIRCLE", 100)
+    monkeypatch.setattr(event_stepper, "MOST_EVENTS_ANY_STEP", 100)
     pos, vel, radius, box = lattice_head_on(3)
     sim = circles_cpu.Simulation.from_arrays(pos, vel, 2 * radius, box=box, scheme="event", precision="f64")
     assert sim.stats()["max_overlap"] <= 1e-12  # touching, not overlapping
@@ -592,7 +616,7 @@ def test_event_step_stops_on_circles_jammed_across_the_box(circles_cpu, monkeypa
         # It stopped at a check (after JAM_CHECK_ROUNDS rounds, then at every doubling) that
         # found more events than the limit. A round may run no counted collision (at one
         # instant the keys order a jam's contacts, some of them touching without approaching).
-        checks = simulation.JAM_CHECK_ROUNDS * 2 ** np.arange(12)
+        checks = event_stepper.JAM_CHECK_ROUNDS * 2 ** np.arange(12)
         assert sim.rounds in checks
         stats = sim.stats()
         assert stats["pair_collisions"] + stats["wall_collisions"] > event.most_events(sim.n)
@@ -607,13 +631,14 @@ def test_two_level_queue_equals_one_level_bit_for_bit(circles_cpu, monkeypatch, 
     one-level queue and the rounds do, so all three agree bit for bit: small-small,
     small-large and large-large collisions, walls, and steps cut short (asserted to occur)."""
     from circles import simulation
+    from circles.event import stepper as event_stepper
     from physics_util import two_size_mixture
 
     pos, vel, radius, box = two_size_mixture(precision)
 
     def make(max_fraction, queue):
         monkeypatch.setattr(simulation, "TWO_LEVEL_MAX_FRACTION", max_fraction)
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
         sim = circles_cpu.Simulation.from_arrays(pos, vel, radius, mass="radius", box=box, scheme="event",
                                                  precision=precision, record_events=100_000)
         sim.step(40)  # 40 steps: the arrays are reordered on the way (REORDER_EVERY), the large list with them
@@ -660,14 +685,14 @@ def test_parts_calendar_any_bucket_width(circles_cpu, monkeypatch, per_bucket):
     2000 circles, so that the threads' first parts of a window fill their queues at the same
     time (with parts of 200 the race was seen once in four runs; the suite's default width, 4
     circles a bucket, never gives a part fewer than one bucket of its own)."""
-    from circles import event
+    from circles.event import stepper as event_stepper
 
     side = 0.8 * np.sqrt(10)
     scene = dict(SCENES["walls-f32-equal"], n=20000, box=(side, side))
     rounds = run(circles_cpu, monkeypatch, scene, False, steps=10)
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 2000)
-    monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", per_bucket)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 2000)
+    monkeypatch.setattr(event_stepper, "QUEUE_BUCKET_CIRCLES", per_bucket)
     sim = run(circles_cpu, monkeypatch, scene, True, steps=10)
     if not sim._parts:
         pytest.skip("one thread: no parts")
@@ -687,15 +712,15 @@ def test_queue_uses_the_bucket_width_its_heads_were_made_for(circles_cpu, monkey
     parts n plus at most one more for each part of each window (`event.queue_parts`), against
     about n / 4 at the compiled width. Heads are filled with a mark first; the touched ones are
     those that no longer hold it."""
-    from circles import event
+    from circles.event import stepper as event_stepper
 
     side = 0.8 * np.sqrt(10)
     scene = dict(SCENES["walls-f32-equal"], n=20000, box=(side, side))
     if in_parts:
         on_threads(monkeypatch)
-        monkeypatch.setattr(event, "PART_CIRCLES", 2000)
+        monkeypatch.setattr(event_stepper, "PART_CIRCLES", 2000)
     run(circles_cpu, monkeypatch, scene, True, steps=2)  # the kernels compiled (or found) at the default width
-    monkeypatch.setattr(event, "QUEUE_BUCKET_CIRCLES", 1)
+    monkeypatch.setattr(event_stepper, "QUEUE_BUCKET_CIRCLES", 1)
     sim = run(circles_cpu, monkeypatch, scene, True, steps=2)
     if in_parts and not sim._parts:
         pytest.skip("one thread: no parts")
@@ -724,11 +749,12 @@ def test_split_fails_when_a_border_needs_one_claim_more_than_its_share(circles_c
     import taichi as ti
 
     from circles import event
+    from circles.event import stepper as event_stepper
     from circles.geometry import spans
-    from circles.simulation import SPEED_MARGIN
+    from circles.event.stepper import SPEED_MARGIN
 
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 300)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 300)
     n, box = 4000, (1.0, 1.0)
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=n, box=box, radius=0.005, speed=(0.0, 1.0), boundary="walls",
                                                    scheme="event", precision="f64", seed=2))
@@ -776,13 +802,15 @@ def test_a_split_that_fails_after_a_window_ran_refines_the_rest_of_the_step(circ
     after a window ran, counted over 40 steps of the windows scene), so here the split is made
     to fail once at the step's start (two windows) and once at the start of each step's second
     window (four); the state and event log must still equal the rounds' bit for bit."""
-    from circles import event, simulation
+    from circles import event
+    from circles.event import stepper as event_stepper
+    from circles.event import split as event_split
 
     scene = PARTS_SCENES["walls-f32-equal"]
     rounds = run(circles_cpu, monkeypatch, scene, False)
     on_threads(monkeypatch)
-    monkeypatch.setattr(event, "PART_CIRCLES", 200)
-    monkeypatch.setattr(simulation, "PART_CLAIMS", 4)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "PART_CLAIMS", 4)
     split = event.split_parts
     steps = []  # per step (a split that holds at time 0 starts one): (start, length) of its windows
     state = {"start_failed": False, "step_failed": True, "mid_step_failures": 0, "sim": None}
@@ -792,7 +820,7 @@ def test_a_split_that_fails_after_a_window_ran_refines_the_rest_of_the_step(circ
         if t == 0 and not state["start_failed"]:
             state["start_failed"] = True
             return 0
-        if t > 0 and not state["step_failed"] and state["sim"]._windows < simulation.MOST_WINDOWS:
+        if t > 0 and not state["step_failed"] and state["sim"]._windows < event_stepper.MOST_WINDOWS:
             state["step_failed"] = True
             state["mid_step_failures"] += 1
             return 0
@@ -804,8 +832,8 @@ def test_a_split_that_fails_after_a_window_ran_refines_the_rest_of_the_step(circ
             steps[-1].append((t, length))
         return ok
 
-    monkeypatch.setattr(event, "split_parts", failing_split)
-    monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", True)
+    monkeypatch.setattr(event_split, "split_parts", failing_split)
+    monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", True)
     sim = circles_cpu.Simulation(circles_cpu.Scene(scheme="event", seed=3, **scene), record_events=100_000)
     if not sim._parts:
         pytest.skip("one thread: no parts")
@@ -843,14 +871,14 @@ def test_collisions_at_one_instant_run_in_key_order_in_the_rounds_as_in_the_queu
     that made a third event with one of its circles, first: another order than the queue's
     (circle 4 left at +0.25 instead of -0.039). Now the bounds carry the key of the event that
     sets them, and both give the cascade in key order, bit for bit between them."""
-    from circles import simulation
+    from circles.event import stepper as event_stepper
 
     r = 0.125
     pos = np.array([[0.5, 1.0]] + [[1.0 + 0.25 * k, 1.0] for k in range(5)])  # a row in contact, exactly
     vel = np.array([[1.0, 0.0]] + [[0.0, 0.0]] * 5)
     runs = {}
     for queue in (True, False):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
         sim = circles_cpu.Simulation.from_arrays(pos, vel, r, mass=masses, box=(4.0, 2.0), record_events=100)
         sim.advance(0.5)  # the hit at 0.25, then the circles part; no wall is reached
         runs[queue] = sim
@@ -864,7 +892,7 @@ def test_collisions_at_one_instant_run_in_key_order_in_the_rounds_as_in_the_queu
     row = np.array([[0.125 + 0.25 * k, 1.0] for k in range(4)] + [[2.0, 1.0]])
     ends = []
     for queue in (True, False):
-        monkeypatch.setattr(simulation, "EVENT_QUEUE_ON_CPU", queue)
+        monkeypatch.setattr(event_stepper, "EVENT_QUEUE_ON_CPU", queue)
         sim = circles_cpu.Simulation.from_arrays(row, np.array([[0.0, 0.0]] * 4 + [[-1.0, 0.0]]), r,
                                                  mass=masses[:5], box=(4.0, 2.0), record_events=1000)
         sim.advance(3.0)

@@ -236,6 +236,7 @@ def test_discrete_two_level_grid_matches_one_level(circles_cpu, monkeypatch, pre
     (which search their cells again)."""
     import circles
     from circles import simulation
+    from circles.discrete import stepper as discrete_stepper
     from physics_util import two_size_mixture
 
     pos, vel, radius, box = two_size_mixture(precision)
@@ -256,7 +257,7 @@ def test_discrete_two_level_grid_matches_one_level(circles_cpu, monkeypatch, pre
     # The one-level grid of this 1.5:1 box runs along the box's y (`simulation.TRANSPOSE_WIDE_GRIDS`).
     assert one.grid.transposed and not two.grid.transposed
     assert two.grid.ncx > 3 * one.grid.ncy  # the cells along x are sized for the small circles
-    assert most > simulation.DISCRETE_CONTACTS  # some circle outgrew its contact list
+    assert most > discrete_stepper.DISCRETE_CONTACTS  # some circle outgrew its contact list
     a, b = two.state(), one.state()
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.vel, b.vel)
     sa, sb = two.stats(), one.stats()
@@ -304,10 +305,11 @@ def test_wide_box_grid_along_y_gives_the_same_state(circles_cpu, monkeypatch, sc
     numbering changes, so 40 steps (two reorders of the arrays on the way) must leave the same
     state bit for bit as the grid along x: positions, velocities, collisions and pressure sums.
     The loops run on the CPU's threads, the event queue in parts, as a large scene's do."""
-    from circles import backend, event, simulation
+    from circles import backend, simulation
+    from circles.event import stepper as event_stepper
     monkeypatch.setattr(backend, "SERIAL_N", 0)
     monkeypatch.setattr(backend, "EVENT_SERIAL_WORK", 0)
-    monkeypatch.setattr(event, "PART_CIRCLES", 200)
+    monkeypatch.setattr(event_stepper, "PART_CIRCLES", 200)
     scene = circles_cpu.Scene(n=2000, box=(1.6, 0.4), radius=0.006, speed=(0.5, 1.0), boundary=boundary,
                               scheme=scheme, precision=precision, seed=4)
 

@@ -6,11 +6,11 @@ import pytest
 import taichi as ti
 
 from circles import cli
-from circles import simulation as simulation_module
+from circles import memory as simulation_module
 from circles.backend import serial_loops
 from circles.grid import count_parts
-from circles.simulation import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, PART_BYTES, NotEnoughMemory,
-                                available_memory, check_memory)
+from circles.memory import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, PART_BYTES, NotEnoughMemory,
+                            available_memory, check_memory)
 from conftest import TEST_ARCH
 
 pytestmark = pytest.mark.skipif(TEST_ARCH != "cpu", reason="the memory checked is a CPU's")
@@ -19,9 +19,9 @@ BYTES = {ti.f32: 4, ti.i32: 4, ti.f64: 8}
 
 
 def held_bytes(sim):
-    """Bytes of every Taichi array the simulation and its grid hold (each counted once)."""
+    """Bytes of every Taichi array the simulation, its grid and its stepper hold (each counted once)."""
     seen = {}
-    for obj in (sim, sim.grid):
+    for obj in (sim, sim.grid, sim.stepper):
         for value in vars(obj).values():
             items = value.values() if isinstance(value, dict) else value if isinstance(value, (tuple, list)) else (
                 value,)

@@ -1,6 +1,6 @@
 """What a kernel call costs on a CPU besides its kernel: Python's work and Taichi's launch.
 
-    python bench/launch_cost.py [--calls 5000] [--runs 5]
+    python bench/diagnostics/launch_cost.py [--calls 5000] [--runs 5]
 
 Kernels that do (almost) nothing, with 1 and with 30 ndarray arguments (and two scalars), each
 called `calls` times in a row through circles' fast calls (`circles/launch.py`) and through
@@ -14,7 +14,7 @@ each stage of a step is): a kernel of LOOPS + 1 loops over m items against one o
 loop, per further loop, with the loops run in parallel (each starts the CPU's thread pool) and
 with the loops serialized (on the calling thread), for m = 1, 1000 and 100000. The parallel
 start is what a stage pays for running on several threads (see circles.backend.SERIAL_N and
-circles.simulation.DISCRETE_PARALLEL_ROUNDS).
+circles.discrete.stepper.DISCRETE_PARALLEL_ROUNDS).
 """
 import argparse
 import statistics

@@ -1,6 +1,6 @@
 """What a plain loop costs in Taichi's CPU code, against numpy: the floor under a step's passes.
 
-    python bench/loop_cost.py [--mb 128] [--reps 7] [--grid-n 1e6]
+    python bench/diagnostics/loop_cost.py [--mb 128] [--reps 7] [--grid-n 1e6]
 
 Copies of a float32 array larger than the cache (bytes read plus written per second, the
 median with [min, max] over `reps` runs after one that compiles): a Taichi loop on all
@@ -16,7 +16,7 @@ Taichi's generated loop reads each array's data pointer from the kernel's argume
 at every access; after a store, which might alias that buffer, it reads it again, and a
 loop that takes one item per iteration runs far below the memory's speed. A loop with no
 store keeps the pointers in registers (the read-only row). See circles/loops.py and
-bench/PERFORMANCE.md (the discrete scheme on a CPU).
+the Performance page of the docs (the discrete scheme on a CPU).
 """
 import argparse
 import math

@@ -1,6 +1,6 @@
 """Side-by-side speed of this tree's engine against an earlier commit, in one run.
 
-    python bench/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
+    python bench/diagnostics/versus.py --base 0686cb3 [--n 100000 1000000] [--scheme discrete event] [--rounds 3]
                            [--arch cpu|gpu] [--steps K] [--warm W] [--scene bench|spread] [--interleave]
                            [--batch B]
 
@@ -41,11 +41,12 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
+DIAGNOSTICS = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT / "bench"))
 from bench import engine_revision  # noqa: E402  (the name bench.py gives the engine in its tables)
 
-#: One engine's run: the scene and the step timing of kernel_profile.py (from this tree's bench/,
+#: One engine's run: the scene and the step timing of kernel_profile.py (from this tree's bench/diagnostics/,
 #: whichever engine `circles` is imported from).
 CHILD = """
 import json, sys
@@ -141,7 +142,7 @@ def export(ref, into):
 
 def run(tree, n, scheme, steps, arch, scene, warm):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    out = child([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(ROOT / "bench"), arch, scene, str(warm)],
+    out = child([sys.executable, "-c", CHILD, str(n), scheme, str(steps), str(DIAGNOSTICS), arch, scene, str(warm)],
                 env=env, cwd=str(tree))
     return json.loads(out.strip().splitlines()[-1])
 
@@ -153,7 +154,7 @@ def run_paired(base_tree, scratch, n, scheme, steps, arch, warm, batch=1):
     if not (pkg_dir / "circles_base").is_dir():
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    out = child([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(ROOT / "bench"), arch, str(pkg_dir),
+    out = child([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(DIAGNOSTICS), arch, str(pkg_dir),
                  str(warm), str(batch)], env=env, cwd=str(ROOT))
     return json.loads(out.strip().splitlines()[-1])
 

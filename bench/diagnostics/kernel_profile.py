@@ -1,6 +1,6 @@
 """Where a step's time goes: per-kernel-task times from Taichi's kernel profiler.
 
-    python bench/kernel_profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
+    python bench/diagnostics/kernel_profile.py [--arch cpu|gpu] [--n 1e6 ...] [--scheme discrete event] [--steps 20]
                                    [--warm 2]
 
 The bench scene (radius 0.5, area fraction 0.3, 16:9 walled box, speeds 0.5 to 1, float32,
@@ -11,7 +11,7 @@ default; 60 to profile a relaxed scene, as bench.py's throughput rows time), the
 then `steps` more with it, and the profiler's table is printed: each row one offloaded task
 of a kernel (on the GPU a task is one device kernel; `serial` tasks run on one thread),
 with its calls and total time. The profiler adds a synchronisation per task, so the timed
-pass, not the profiled one, gives the speed. `bench/versus.py` times steps the same way.
+pass, not the profiled one, gives the speed. `bench/diagnostics/versus.py` times steps the same way.
 """
 
 import argparse
@@ -24,7 +24,7 @@ import taichi as ti
 
 import circles
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/, for bench.py
 from bench import AREA_FRACTION, ASPECT, R, SPEED, box_for  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """Cost per circle-step across N, the scenes measured in turn in one process.
 
-    python bench/flatness.py [--scheme event|discrete] [--n 10000 100000 1000000]
+    python bench/diagnostics/flatness.py [--scheme event|discrete] [--n 10000 100000 1000000]
                              [--warm 60] [--rounds 30] [--arch cpu|gpu]
 
 Every scene is bench.py's throughput scene (area fraction 0.3, 16:9 walls, f32, radius 0.5,

@@ -1,6 +1,6 @@
 """Cost per unit of simulated time against the step length, the lengths measured in turn in one process.
 
-    python bench/step_length.py [--scheme event|discrete] [--n 1000000] [--factors 0.25 0.5 1 2 3]
+    python bench/diagnostics/step_length.py [--scheme event|discrete] [--n 1000000] [--factors 0.25 0.5 1 2 3]
                                 [--warm 6] [--span 0.9] [--rounds 12] [--arch cpu|gpu]
 
 The scene is bench.py's throughput scene (area fraction 0.3, 16:9 walls, f32, radius 0.5,
@@ -40,6 +40,7 @@ import taichi as ti
 import circles
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/, for bench.py
 from bench import R, SPEED  # noqa: E402
 from kernel_profile import bench_scene  # noqa: E402
 
