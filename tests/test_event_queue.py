@@ -170,8 +170,9 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 @pytest.mark.parametrize("name,claims", [("walls-f32-equal", 4), pytest.param("walls-f64-radius", 4, marks=pytest.mark.slow),
                                          pytest.param("walls-f32-radius", 4, marks=pytest.mark.slow),
-                                         ("periodic-f64-area", 4), ("walls-f32-slow-fast", 4),
-                                         ("walls-f64-radius", 16), ("walls-f32-radius", 16),
+                                         pytest.param("periodic-f64-area", 4, marks=pytest.mark.slow), ("walls-f32-slow-fast", 4),
+                                         pytest.param("walls-f64-radius", 16, marks=pytest.mark.slow),
+                                         pytest.param("walls-f32-radius", 16, marks=pytest.mark.slow),
                                          ("walls-f32-equal", 10**9), ("walls-f32-wide", 4), ("periodic-f64-wide", 4)],
                          ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "cut-windows",
                               "cut-windows-f32", "no-split", "wide", "wide-periodic"])
