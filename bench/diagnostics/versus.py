@@ -82,7 +82,9 @@ circles_base.backend._state.update(initialized=True, arch=circles.backend.curren
 sims = {}
 for name, pkg in (("base", circles_base), ("this", circles)):
     scene = bench_scene(n, scheme, seed=1)
-    sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__}))
+    # The fields both engines' Scene take (an older one may lack some, such as area_fraction).
+    sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__
+                                             if f in pkg.Scene.__dataclass_fields__}))
     sims[name].step(int(sys.argv[7]))  # compiles every kernel of a step, the reorder of every 16th step included
 start = {k: s.stats() for k, s in sims.items()}
 times = {"base": [], "this": []}
