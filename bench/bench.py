@@ -372,7 +372,7 @@ def arrays(obj):
         for a in (v.values() if isinstance(v, dict) else v if isinstance(v, (tuple, list)) else (v,)):
             if isinstance(a, ti.lang._ndarray.Ndarray):
                 yield a
-seen = {id(a): a for a in list(arrays(sim)) + list(arrays(sim.grid))}
+seen = {id(a): a for a in list(arrays(sim)) + list(arrays(sim.grid)) + list(arrays(sim.stepper))}
 size = {ti.f32: 4, ti.i32: 4, ti.f64: 8}
 allocated = sum(int(np.prod(a.shape)) * getattr(a, "n", 1) * size[a.dtype] for a in seen.values())
 print(allocated, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
