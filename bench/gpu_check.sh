@@ -35,7 +35,8 @@ summary="$out/summary.txt"
   command -v nvidia-smi > /dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
 } >> "$summary" 2>&1
 
-CIRCLES_TEST_ARCH=$arch timeout "$test_s" "$python" -m pytest -q -x -p no:cacheprovider --durations=10 \
+# -o addopts="": every test of these files, slow ones too, in one process (no pytest-xdist there).
+CIRCLES_TEST_ARCH=$arch timeout "$test_s" "$python" -m pytest -q -x -p no:cacheprovider -o addopts="" --durations=10 \
   tests/test_reference.py tests/test_physics.py tests/test_conservation.py tests/test_collisions.py \
   > "$out/tests.log" 2>&1
 echo "tests: exit $?" >> "$summary"
