@@ -173,7 +173,8 @@ def test_queue_on_several_threads_equals_rounds(circles_cpu, monkeypatch, name):
                                          pytest.param("periodic-f64-area", 4, marks=pytest.mark.slow), ("walls-f32-slow-fast", 4),
                                          pytest.param("walls-f64-radius", 16, marks=pytest.mark.slow),
                                          pytest.param("walls-f32-radius", 16, marks=pytest.mark.slow),
-                                         ("walls-f32-equal", 10**9), ("walls-f32-wide", 4), ("periodic-f64-wide", 4)],
+                                         ("walls-f32-equal", 10**9), ("walls-f32-wide", 4),
+                                         pytest.param("periodic-f64-wide", 4, marks=pytest.mark.slow)],
                          ids=["windows", "cut-steps", "cut-steps-f32", "periodic", "slow-fast", "cut-windows",
                               "cut-windows-f32", "no-split", "wide", "wide-periodic"])
 def test_queue_in_parts_equals_rounds(circles_cpu, monkeypatch, name, claims):
@@ -296,6 +297,7 @@ def test_parts_with_a_full_sum_log_equal_rounds(circles_cpu, monkeypatch, name):
         assert sim.cut_steps > 0
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the queue runs on a CPU only")
 def test_a_copy_carries_the_steps_that_filled_the_sum_log(circles_cpu, monkeypatch):
     """A copy carries the event scheme's counters of work (`EventStepper.WORK_COUNTERS`), the
