@@ -12,14 +12,15 @@ import sys
 
 import numpy as np
 
-from conftest import TEST_ARCH
+from conftest import TEST_ARCH, TEST_INIT_OPTIONS
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-#: Script lines that start Taichi as the first argument says ("cpu:2", "gpu").
-INIT = """
+#: Script lines that start Taichi as the first argument says ("cpu:2", "gpu"), with the
+#: suite's options (conftest.TEST_INIT_OPTIONS).
+INIT = f"""
 arch, _, threads = sys.argv[1].partition(":")
-circles.init(arch=arch, **({"cpu_max_num_threads": int(threads)} if threads else {}))
+circles.init(arch=arch, **({{"cpu_max_num_threads": int(threads)}} if threads else {{}}), **{TEST_INIT_OPTIONS!r})
 """
 
 
