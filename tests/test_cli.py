@@ -5,11 +5,8 @@ t = T is simulated but not drawn (see circles.cli).
 """
 
 import math
-import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -19,17 +16,11 @@ import pytest
 import circles
 from circles import cli
 from conftest import TEST_ARCH
+from process_util import run_cli, stop_with_ctrl_c
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1",
          "--size", "80x60", "--arch", "cpu"]
-
-
-def run_cli(args, cwd, extra_env=None, **options):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-           **(extra_env or {})}
-    return subprocess.run([sys.executable, "-m", "circles.cli", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=120, **options)
 
 
 def test_run_writes_a_gif_of_duration_times_fps_frames(tmp_path):
@@ -97,23 +88,11 @@ def test_scene_file_with_flags_overriding_it(tmp_path):
 
 
 def test_ctrl_c_stops_and_keeps_a_playable_file(tmp_path):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     out = tmp_path / "long.gif"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "circles.cli", "run", *SMALL, "--duration", "1000",
-         "--fps", "10", "--out", str(out)],
-        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 90
-        while not (out.exists() and out.stat().st_size > 2000):  # past a frame or two
-            assert process.poll() is None, process.communicate()
-            assert time.monotonic() < deadline
-            time.sleep(0.2)
-        process.send_signal(signal.SIGINT)
-        stdout, stderr = process.communicate(timeout=60)
-    finally:
-        process.kill()
-    assert process.returncode == 130, stderr
+    returncode, stdout, stderr = stop_with_ctrl_c(
+        ["run", *SMALL, "--duration", "1000", "--fps", "10", "--out", str(out)], tmp_path,
+        lambda: out.exists() and out.stat().st_size > 2000, poll=0.2)  # past a frame or two
+    assert returncode == 130, stderr
     assert "Traceback" not in stderr
     assert "stopped by Ctrl-C" in stdout
     frames = iio.imread(out, index=None)
@@ -354,10 +333,8 @@ sys.exit(cli.main(sys.argv[1:]))
 def test_a_run_that_fails_midway_exits_1_and_keeps_its_frames(tmp_path):
     """An error during the run (here a ValueError from the simulation, which escaped as a
     traceback before) ends it with status 1 and one line, and the frames made so far play."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    result = subprocess.run([sys.executable, "-c", FAILING_RUN, "run", *SMALL, "--duration", "1", "--fps", "10",
-                             "--out", "run.gif"], cwd=tmp_path, env=env, capture_output=True, text=True,
-                            timeout=120)
+    result = run_cli(["run", *SMALL, "--duration", "1", "--fps", "10", "--out", "run.gif"], tmp_path,
+                     python=("-c", FAILING_RUN))
     assert result.returncode == 1, result.stderr
     assert "Traceback" not in result.stderr
     assert "circles: the run failed: dt = 1e-12 is below the resolution" in result.stderr
@@ -402,10 +379,7 @@ sys.exit(cli.main(sys.argv[1:]))
 
 
 def run_with_ctrl_c(args, cwd, at_frame=-1, at_close=False):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    script = CTRL_C_RUN.format(at_frame=at_frame, at_close=at_close)
-    return subprocess.run([sys.executable, "-c", script, *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=120)
+    return run_cli(args, cwd, python=("-c", CTRL_C_RUN.format(at_frame=at_frame, at_close=at_close)))
 
 
 def frames_in(path):
@@ -496,11 +470,9 @@ def test_circle_file_overlap_across_the_y_seam_is_refused(tmp_path):
 # U: the --seed flag places the scene with that seed.
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the command line runs on the CPU here, the test's simulation on the GPU")
 def test_cli_seed_flag_places_with_that_seed(tmp_path, circles_cpu):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    done = subprocess.run([sys.executable, "-m", "circles.cli", "run", "--n", "30", "--box", "4", "3", "--radius", "0.1",
-                           "--speed", "1", "2", "--seed", "7", "--duration", "0.1", "--fps", "10", "--size", "80x60",
-                           "--out", "frames", "--arch", "cpu", "--threads", "1"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=300)
+    done = run_cli(["run", "--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "1", "2", "--seed", "7",
+                    "--duration", "0.1", "--fps", "10", "--size", "80x60", "--out", "frames", "--arch", "cpu",
+                    "--threads", "1"], tmp_path, timeout=300)
     assert done.returncode == 0, done.stderr
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(4.0, 3.0), radius=0.1, speed=(1.0, 2.0), seed=7))
     assert np.array_equal(iio.imread(tmp_path / "frames" / "frame_00000.png"), sim.render(80, 60))
@@ -527,10 +499,8 @@ sys.exit(cli.main(sys.argv[1:]))
 
 
 def test_ctrl_c_while_the_engine_loads_stops_at_once_and_leaves_nothing(tmp_path):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    result = subprocess.run([sys.executable, "-c", EARLY_CTRL_C, "run", *SMALL, "--duration", "2", "--fps", "10",
-                             "--out", "new/run.gif"], cwd=tmp_path, env=env, capture_output=True, text=True,
-                            timeout=300)
+    result = run_cli(["run", *SMALL, "--duration", "2", "--fps", "10", "--out", "new/run.gif"], tmp_path,
+                     python=("-c", EARLY_CTRL_C), timeout=300)
     assert result.returncode == 130, result.stderr
     assert result.stderr.strip() == "circles: stopped by Ctrl-C" and result.stdout == ""
     assert list(tmp_path.iterdir()) == []
@@ -550,10 +520,8 @@ def test_a_summary_that_cannot_be_printed_is_said_so_and_the_file_is_whole(tmp_p
     """With standard output on a full device, the run itself succeeded: the message said the
     run failed, as for a full disk under the video."""
     with open("/dev/full", "w") as full:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-        result = subprocess.run([sys.executable, "-m", "circles.cli", "run", *SMALL, "--duration", "0.5", "--fps",
-                                 "10", "--out", "run.gif"], cwd=tmp_path, env=env, stdout=full, stderr=subprocess.PIPE,
-                                text=True, timeout=120)
+        result = run_cli(["run", *SMALL, "--duration", "0.5", "--fps", "10", "--out", "run.gif"], tmp_path,
+                         stdout=full, stderr=subprocess.PIPE)
     assert result.returncode == 1
     assert result.stderr.strip().endswith("run.gif is complete, but its summary could not be printed: [Errno 28] "
                                           "No space left on device"), result.stderr

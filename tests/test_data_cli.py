@@ -2,31 +2,15 @@
 subprocess: files read back with gsd.hoomd, bad paths refused before any simulating, a run
 stopped by Ctrl-C leaves whole rows and frames."""
 
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
-
 import gsd.hoomd
 import numpy as np
 import pytest
 
 from circles import observables
 from circles.writers import read_stats
+from process_util import run_cli, stop_with_ctrl_c
 
-ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n", "30", "--box", "4", "3", "--radius", "0.1", "--speed", "0.5", "1", "--arch", "cpu"]
-
-
-def env():
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-
-
-def run_cli(args, cwd, timeout=120, python=()):
-    return subprocess.run([sys.executable, *python, "-m", "circles.cli", *args], cwd=cwd, env=env(),
-                          capture_output=True, text=True, timeout=timeout)
 
 
 def test_a_measuring_run_writes_rows_and_frames_and_no_video(tmp_path):
@@ -83,22 +67,12 @@ def test_force_overwrites(tmp_path):
 
 
 def test_ctrl_c_leaves_whole_rows_and_frames(tmp_path):
-    process = subprocess.Popen(
-        [sys.executable, "-m", "circles.cli", "run", *SMALL, "--boundary", "periodic", "--duration", "1000",
-         "--fps", "50", "--out", "none", "--stats", "run.csv", "--trajectory", "run.gsd"],
-        cwd=tmp_path, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     table = tmp_path / "run.csv"
-    try:
-        deadline = time.monotonic() + 90
-        while not (table.exists() and table.read_text().count("\n") > 4):
-            assert process.poll() is None, process.communicate()
-            assert time.monotonic() < deadline
-            time.sleep(0.1)
-        process.send_signal(signal.SIGINT)
-        stdout, stderr = process.communicate(timeout=60)
-    finally:
-        process.kill()
-    assert process.returncode == 130, stderr
+    returncode, stdout, stderr = stop_with_ctrl_c(
+        ["run", *SMALL, "--boundary", "periodic", "--duration", "1000", "--fps", "50", "--out", "none",
+         "--stats", "run.csv", "--trajectory", "run.gsd"], tmp_path,
+        lambda: table.exists() and table.read_text().count("\n") > 4)
+    assert returncode == 130, stderr
     assert "Traceback" not in stderr
     text = table.read_text()
     assert text.endswith("\n") and all(line.count(",") == 11 for line in text.splitlines())
@@ -133,8 +107,7 @@ def test_plot_without_matplotlib_gives_a_hint(tmp_path):
     (tmp_path / "run.csv").write_text(",".join(observables.COLUMNS) + "\n")
     hide = ("-c", "import sys; sys.modules['matplotlib'] = None; from circles.cli import main; "
                   "sys.exit(main(sys.argv[1:]))")
-    done = subprocess.run([sys.executable, *hide, "plot", "run.csv"], cwd=tmp_path, env=env(),
-                          capture_output=True, text=True, timeout=60)
+    done = run_cli(["plot", "run.csv"], tmp_path, python=hide, timeout=60)
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == ["circles: error: circles plot needs matplotlib: pip install "
                                                 "'circles[plot]' (or pip install matplotlib)"]
