@@ -11,10 +11,20 @@ import taichi as ti
 
 ARCHES = ("auto", "cpu", "gpu")
 
-_state = {"initialized": False, "arch": None, "runtime": 0}
+_state = {"initialized": False, "arch": None, "runtime": 0, "optimization_given": False}
 #: Callables run before `init` restarts the runtime, to let go of the arrays the running one
 #: made (`on_restart`).
 _restart_hooks = []
+#: Callables run when `compile_for` changes how kernels compile: each drops the compiled
+#: kernels it holds (`on_recompile`).
+_recompile_hooks = []
+
+#: From this many circles up, kernels on a CPU compile with Taichi's CFG optimisation pass;
+#: below, without it. The pass takes most of a kernel's compile time (a first step's compile
+#: drops from about 19 s to 3 s without it) and gives the same bits; below this size the
+#: kernels it makes run no faster, at 1e6 circles they run about 15% faster (the Performance
+#: page gives the measurements).
+OPTIMIZE_FROM_N = 100_000
 
 
 def on_restart(hook):
@@ -25,10 +35,19 @@ def on_restart(hook):
     return hook
 
 
+def on_recompile(hook):
+    """Run `hook()` whenever `compile_for` switches Taichi's CFG optimisation: it drops every
+    compiled kernel it holds, so that none compiled one way serves a scene meant for the other."""
+    _recompile_hooks.append(hook)
+    return hook
+
+
 def init(arch: str = "auto", **options) -> str:
     """Start the Taichi runtime on `arch` ("cpu", "gpu" or "auto") and return the arch in use.
 
-    `options` go to `ti.init` unchanged (for example `cpu_max_num_threads=1`).
+    `options` go to `ti.init` unchanged (for example `cpu_max_num_threads=1`). Without
+    `cfg_optimization` among them, each Simulation on a CPU chooses it by its size
+    (`compile_for`).
     "gpu" fails with a clear error when no GPU backend can start; "auto" takes a GPU when
     one is present and the CPU otherwise. Calling it again restarts the runtime: every
     Simulation made before lets go of its arrays and raises a RuntimeError when used.
@@ -61,8 +80,26 @@ def init(arch: str = "auto", **options) -> str:
         _state["initialized"] = False
         raise RuntimeError("arch 'gpu' asked for, but no GPU backend could start: "
                            "use arch='cpu' or arch='auto' (on the command line, --arch cpu or --arch auto)")
-    _state.update(initialized=True, arch=name)
+    _state.update(initialized=True, arch=name, optimization_given="cfg_optimization" in options)
     return name
+
+
+def compile_for(n: int) -> None:
+    """Make the kernels compiled from now on suit a scene of n circles: on a CPU, with Taichi's
+    CFG optimisation from OPTIMIZE_FROM_N circles up, and without it below (seconds instead of
+    tens of seconds to compile, the same results bit for bit). A switch drops every kernel
+    compiled the other way; Taichi's offline cache keeps both kinds, keyed by the option. Does
+    nothing on a GPU, or when `init` was given `cfg_optimization`."""
+    if _state["arch"] != "cpu" or _state["optimization_given"]:
+        return
+    want = n >= OPTIMIZE_FROM_N
+    config = ti.lang.impl.current_cfg()
+    if bool(config.cfg_optimization) == want:
+        return
+    config.cfg_optimization = want
+    ti.lang.impl.get_runtime().clear_compiled_functions()
+    for hook in _recompile_hooks:
+        hook()
 
 
 #: ti.init's own options besides the fields of its compile configuration (`ti.cfg`).

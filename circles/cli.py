@@ -343,6 +343,24 @@ def _sized_scene_fields(fields, overrides, args):
     return merged
 
 
+def _longest_dt(scene):
+    """The longest step the scene can take, known before it is placed: its dt, the default dt of
+    the circles a file lists, or for a random scene the default dt as if every circle had the
+    largest radius and the fastest the least speed (None when a speed may be 0). The run's own
+    dt is then checked again (`check_step_count`)."""
+    import numpy as np
+
+    from .schemes import STEPPERS
+    from .simulation import default_dt
+
+    if scene.dt is not None:
+        return scene.dt
+    if not hasattr(scene, "speed"):  # a CircleList
+        return default_dt(scene.scheme, scene.radius, scene.vel)
+    slowest = scene.speed[0]
+    return STEPPERS[scene.scheme].default_dt(np.array([scene.radius[1]]), slowest) if slowest > 0 else None
+
+
 def _circle_list(path, fields, args):
     """The circles of a scene file with [[circle]] entries, flags applied and checked."""
     from .scenefile import circle_list_from_dict
@@ -386,6 +404,12 @@ def _prepare(argv, made):
             where = f"{args.scene}: " if args.scene else ""
             raise UsageError(f"{where}{error}") from None
     options = _run_options(file_run, args)
+    try:
+        longest = _longest_dt(scene)
+    except ValueError as error:
+        raise UsageError(f"{args.scene}: {error}") from None
+    if longest is not None:
+        check_step_count(options["duration"], longest)
     from .trajectory import check_path
     try:
         for key, suffix in (("stats", ".csv"), ("trajectory", ".gsd")):

@@ -71,14 +71,12 @@ def first_use(kind) -> bool:
 
 
 def announce(scene, arch="auto", threads=0, stream=None):
-    """Print MESSAGE on `stream` when the scene's kernel set is new here; True when it is. By
-    default the stream is stderr, and only a terminal's: like the progress bar, the message is
-    for a person watching (a script reading stderr gets its errors alone)."""
+    """Print MESSAGE on `stream` (stderr by default, a terminal or not) when the scene's kernel
+    set is new here; True when it is. Compiling a new set takes seconds, so a run that would
+    otherwise sit silent says why."""
     import sys
 
     new = first_use(kind_of(scene, arch, threads))
-    if stream is None:
-        stream = sys.stderr if sys.stderr.isatty() else None
-    if new and stream is not None:
-        print(MESSAGE, file=stream, flush=True)
+    if new:
+        print(MESSAGE, file=sys.stderr if stream is None else stream, flush=True)
     return new

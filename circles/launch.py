@@ -34,7 +34,7 @@ from taichi.lang import impl
 from taichi.lang._ndarray import Ndarray
 from taichi.types import ndarray_type, primitive_types, template
 
-from .backend import on_restart
+from .backend import on_recompile, on_restart
 
 _NDARRAY, _FLOAT, _INT = 0, 1, 2
 _SIGNED_IDS = {id(t) for t in (ti.i8, ti.i16, ti.i32, ti.i64, int)}
@@ -248,6 +248,15 @@ def _forget_runtime():
     then crashed within a few restarts (Taichi 1.7 on a CPU)."""
     for fast in list(_kernels):
         fast._forget()
+
+
+@on_recompile
+def _forget_compiled():
+    """When `backend.compile_for` changes how kernels compile, every fast kernel drops what it
+    compiled and bound (the program stays)."""
+    for fast in list(_kernels):
+        fast._compiled = {}
+        fast._bindings = {}
 
 
 def kernel(fn):

@@ -18,7 +18,7 @@ import numpy as np
 import taichi as ti
 
 from . import launch, observables, placement, reductions
-from .backend import ensure_init, on_restart, runtime, serial_loops
+from .backend import compile_for, ensure_init, on_restart, runtime, serial_loops
 from .discrete.contacts import PART_PICKS
 from .discrete.rounds import list_large
 from .event.stepper import SPEED_MARGIN
@@ -112,6 +112,7 @@ class Simulation:
         ensure_init()
         check_record_events(record_events, scene.scheme)
         check_memory(scene.n, scene.scheme, scene.precision, record_events=record_events)
+        compile_for(scene.n)
         pos, vel, radius, mass, color = placement.scene_circles(scene)
         self.scene = scene
         self._setup(pos, vel, radius, mass, color, scene.box, scene.boundary, scene.scheme, scene.precision,
@@ -175,6 +176,7 @@ class Simulation:
         self._runtime = runtime()
         _LIVE.add(self)
         n = radius.shape[0]
+        compile_for(n)
         self.n = n
         self.box = (float(box[0]), float(box[1]))
         self.boundary, self.scheme, self.precision = boundary, scheme, precision

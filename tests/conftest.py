@@ -27,9 +27,9 @@ if TEST_ARCH not in ("cpu", "gpu"):
 #: Taichi options of the suite's own runtimes (this process's and the scripts of
 #: process_util). On the CPU: no CFG optimisation in Taichi's IR passes, so the large step
 #: kernels compile about ten times sooner (the suite compiles some 140 kernel variants). The
-#: kernels give the same bits either way (test_compile_options.py); they run slower at a
-#: million circles, so circles itself keeps Taichi's default. The command-line tests run
-#: `circles` as a user does, with its default.
+#: kernels give the same bits either way (test_compile_options.py). circles itself compiles
+#: this way below `backend.OPTIMIZE_FROM_N` circles and with the pass above, where its kernels
+#: run faster; the command-line tests run `circles` as a user does, with its own choice.
 TEST_INIT_OPTIONS = {"cfg_optimization": False} if TEST_ARCH == "cpu" else {}
 
 
