@@ -58,18 +58,7 @@ RUN_DEFAULTS = {
     "arch": "auto",
     "threads": 0,  # CPU threads: 0 takes all of them
 }
-EXIT_BAD_INPUT = 2
-EXIT_FAILED = 1
-EXIT_INTERRUPTED = 130
-
-
-class UsageError(Exception):
-    """Bad input: the message is printed as one line and the exit status is 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(message)
+from .command import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, Parser, UsageError, remove_made, sweep_or_scene
 
 
 def version_text():
@@ -90,7 +79,7 @@ def version_text():
 
 
 def _build_parser():
-    parser = _Parser(prog="circles", description="Simulate many elastic circles in a box "
+    parser = Parser(prog="circles", description="Simulate many elastic circles in a box "
                      "and write the run as a video, a GIF or PNG frames.")
     parser.add_argument("--version", action="version", version=version_text())
     commands = parser.add_subparsers(dest="command", metavar="run | plot | sweep")
@@ -206,6 +195,9 @@ def _read_scene_file(path):
         data = read_toml(path)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if sweep_or_scene(data) == "sweep":
+        raise UsageError(f"{path} is a sweep file (tables [scene], [vary], [sweep]), not a scene file: run it with "
+                         f"circles sweep {path}")
     run = data.pop("run", {})
     if not isinstance(run, dict):
         raise UsageError(f"{path}: run must be a table [run], not {run!r}")
@@ -755,7 +747,6 @@ def main(argv=None):
         return EXIT_FAILED
     finally:
         if made:  # stopped before the first frame: the folders made for it go
-            from .video import remove_made
             remove_made(made)
 
 

@@ -4,12 +4,11 @@ Three panels over the simulated time: the kinetic energy; the pressure, from the
 in a walled box, from the walls; the collision rate (pair collisions a circle takes part in per
 unit time). Drawn with matplotlib, from the ``plot`` extra (``pip install circles[plot]``).
 """
-import argparse
-
 import sys
 from pathlib import Path
 
-EXIT_BAD_INPUT = 2
+from .command import EXIT_BAD_INPUT, EXIT_FAILED, Parser, UsageError, make_folder, remove_made
+
 HINT = "circles: error: circles plot needs matplotlib: pip install 'circles[plot]' (or pip install matplotlib)"
 
 
@@ -28,11 +27,6 @@ def add_parser(commands):
 def _arguments(parser):
     parser.add_argument("table", metavar="RUN.csv", help="a stats table written by circles run --stats")
     parser.add_argument("--out", metavar="RUN.png", help="the PNG to write (default: RUN.csv's name with .png)")
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise ValueError(message)
 
 
 def draw(columns, out, title=None):
@@ -64,49 +58,57 @@ def draw(columns, out, title=None):
 
 def main(argv):
     """``circles plot``'s entry point; returns the exit status."""
-    from .writers import read_stats
-
-    parser = _Parser(prog="circles plot", description=DESCRIPTION)
+    parser = Parser(prog="circles plot", description=DESCRIPTION)
     _arguments(parser)
+    made = []  # folders made for the PNG, taken away again when nothing is written
     try:
         args = parser.parse_args(argv)
-    except ValueError as error:
+        table = Path(args.table)
+        out = Path(args.out) if args.out else table.with_suffix(".png")
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            print(HINT, file=sys.stderr)
+            return EXIT_BAD_INPUT
+        columns = _checked_table(table, out, made)
+    except UsageError as error:
         print(f"circles plot: error: {error}", file=sys.stderr)
+        remove_made(made)
         return EXIT_BAD_INPUT
     except SystemExit as exit_:  # --help
         return exit_.code if isinstance(exit_.code, int) else 0
-    table = Path(args.table)
-    out = Path(args.out) if args.out else table.with_suffix(".png")
     try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        print(HINT, file=sys.stderr)
-        return EXIT_BAD_INPUT
-    from . import observables
-    problem = None
-    if out.suffix.lower() != ".png":
-        problem = f"--out {out}: the file name must end in .png"
-    elif not out.parent.is_dir():
-        problem = f"--out {out}: the folder {out.parent} does not exist; make it first"
-    elif not table.is_file():
-        problem = f"{table}: no such file (give a table written by circles run --stats)"
-    if problem is None:
-        try:
-            columns = read_stats(table)
-        except (OSError, UnicodeDecodeError, ValueError, IndexError) as error:
-            problem = f"{table}: not a stats table ({error})"
-        else:
-            missing = [name for name in observables.COLUMNS if name not in columns]
-            if missing:
-                problem = f"{table}: not a stats table (no column {', '.join(missing)})"
-            elif len(columns["time"]) == 0:
-                problem = f"{table}: the table has no rows yet"
-    if problem:
-        print(f"circles plot: error: {problem}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    draw(columns, out, title=table.name)
+        draw(columns, out, title=table.name)
+    except OSError as error:
+        out.unlink(missing_ok=True)
+        remove_made(made)
+        print(f"circles plot: the plot failed: cannot write {out}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_FAILED
     print(f"wrote       {out} ({len(columns['time'])} rows)")
     return 0
 
 
+def _checked_table(table, out, made):
+    """The columns of the stats table `table`, once `out` is known to be writable (its missing
+    folders made, listed in `made`); a UsageError of one line otherwise."""
+    from . import observables
+    from .writers import read_stats
+
+    if out.suffix.lower() != ".png":
+        raise UsageError(f"--out {out}: the file name must end in .png")
+    if out.is_dir():
+        raise UsageError(f"--out {out} is a folder: give a .png file's path")
+    if not table.is_file():
+        raise UsageError(f"{table}: no such file (give a table written by circles run --stats)")
+    try:
+        columns = read_stats(table)
+    except (OSError, UnicodeDecodeError, ValueError, IndexError) as error:
+        raise UsageError(f"{table}: not a stats table ({error})") from None
+    missing = [name for name in observables.COLUMNS if name not in columns]
+    if missing:
+        raise UsageError(f"{table}: not a stats table (no column {', '.join(missing)})")
+    if len(columns["time"]) == 0:
+        raise UsageError(f"{table}: the table has no rows yet")
+    make_folder(out.parent, f"--out {out}" if out.name else str(out), made)
+    return columns
 

@@ -118,7 +118,8 @@ def check_dt(dt):
         return None
     dt = _finite("dt", dt)
     if dt <= 0:
-        raise ValueError(f"dt = {dt} must be > 0 (or None to choose it from the scene)")
+        raise ValueError(f"dt = {dt:g} must be > 0: give a step length in simulated seconds, or leave dt out to "
+                         "choose it from the scene")
     if dt > MAX_DT:
         raise ValueError(f"dt = {dt:g} is above {MAX_DT:g}, the longest step (times within a step stay below 1e30, "
                          "the mark of no event): give a shorter dt, or measure times in a smaller unit")

@@ -45,6 +45,9 @@ import uuid
 from dataclasses import dataclass, field, fields
 from numbers import Integral, Real
 
+from .command import (EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, SWEEP_TABLES, Parser, UsageError,
+                      make_folder, sweep_or_scene)
+
 #: The observables a sweep may keep. Each is measured per block; energy_change is the change
 #: of the kinetic energy over a block relative to the energy at the start of the run.
 OBSERVABLES = ("compressibility", "collision_rate", "energy_change", "pressure", "wall_pressure", "temperature")
@@ -59,7 +62,7 @@ MOST_BLOCKS = 10_000
 MOST_TASKS = 100_000
 MOST_DURATION = 1e12
 #: The top-level tables of a sweep file.
-TABLES = ("scene", "vary", "sweep")
+TABLES = SWEEP_TABLES
 #: The name of the results file in the output folder, and of the file that fixes the sweep it
 #: belongs to (a rerun with another base scene or [sweep] table is refused).
 RESULTS = "results.csv"
@@ -138,7 +141,8 @@ def read_sweep(path) -> Sweep:
     try:
         return sweep_from_dict(data, source=str(path))
     except ValueError as error:
-        raise SweepError(f"{path}: {error}") from None
+        message = str(error)
+        raise SweepError(f"{path} {message}" if message.startswith("is a scene file") else f"{path}: {message}") from None
 
 
 def _table(data, name, required):
@@ -180,6 +184,9 @@ def sweep_from_dict(data: dict, source="") -> Sweep:
     from .scene import Scene
 
     unknown = sorted(set(data) - set(TABLES))
+    if unknown and sweep_or_scene(data) == "scene" and "scene" not in data:
+        raise ValueError("is a scene file (Scene fields at top level), not a sweep file: run it with circles run, "
+                         f"or give a sweep file with the tables {', '.join(f'[{t}]' for t in TABLES)}")
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(unknown)}: a sweep file has the tables "
                          f"{', '.join(f'[{t}]' for t in TABLES)}")
@@ -601,13 +608,17 @@ def _number_of(value):
 
 # ---- the command line ---------------------------------------------------------------------
 
+DESCRIPTION = ("Run every point of a sweep file (a base scene and the fields to vary) as tasks on Dask, a row per "
+               "point in DIR/results.csv and a plot per observable. Points already in DIR/results.csv are skipped.")
+
+
 def add_sweep_command(commands):
     """The `circles sweep` subcommand, on the command line's subparsers."""
-    sweep = commands.add_parser(
-        "sweep", help="run many scenes on Dask and measure each",
-        description="Run every point of a sweep file (a base scene and the fields to vary) as tasks on Dask, "
-                    "a row per point in DIR/results.csv and a plot per observable. Points already in "
-                    "DIR/results.csv are skipped.")
+    _sweep_arguments(commands.add_parser("sweep", help="run many scenes on Dask and measure each",
+                                         description=DESCRIPTION))
+
+
+def _sweep_arguments(sweep):
     sweep.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: [scene], [vary] and [sweep] tables")
     where = sweep.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N",
@@ -620,11 +631,12 @@ def add_sweep_command(commands):
 
 
 def main(argv):
-    """`circles sweep ...`: the exit status (0 done, 2 bad input, 1 failed, 130 Ctrl-C)."""
-    from .cli import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, UsageError, _build_parser
-
+    """`circles sweep ...` (argv from "sweep" on): the exit status (0 done, 2 bad input, 1 failed,
+    130 Ctrl-C)."""
+    parser = Parser(prog="circles sweep", description=DESCRIPTION)
+    _sweep_arguments(parser)
     try:
-        args = _build_parser().parse_args(argv)
+        args = parser.parse_args(argv[1:])
         sweep = read_sweep(args.sweep)
         if args.workers is not None and not 0 <= args.workers <= 4096:
             raise SweepError(f"--workers {args.workers} must be from 0 (no Dask: this process) to 4096")
@@ -638,6 +650,7 @@ def main(argv):
             except ImportError:
                 raise SweepError("circles sweep runs its tasks on Dask, which is not installed: pip install "
                                  "'circles[sweep]', or give --workers 0 to run them one by one here") from None
+        make_folder(out, f"--out {out}")  # before any cluster starts
     except (UsageError, SweepError) as error:
         print(f"circles: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -692,8 +705,9 @@ def main(argv):
               file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler
-        print(f"circles: the sweep failed: {type(error).__name__}: {error}; the points done are in "
-              f"{os.path.join(out, RESULTS)}", file=sys.stderr)
+        results = os.path.join(out, RESULTS)
+        where = (f"the points done are in {results}" if os.path.isfile(results) else "no point was done")
+        print(f"circles: the sweep failed: {type(error).__name__}: {error}; {where}", file=sys.stderr)
         return EXIT_FAILED
     finally:
         if client is not None:

@@ -52,6 +52,7 @@ import numpy as np
 import taichi as ti
 
 from . import observables
+from .command import make_folder
 
 #: Types are named "A", "B", ... one per distinct radius, up to MOST_TYPES; more radii than that
 #: (a continuous range) get one type for all.
@@ -129,18 +130,7 @@ def check_path(path, force=False, suffix=".gsd", what="--trajectory", made=None)
         raise ValueError(f"{what} {path}: the file name must end in {suffix}, e.g. run{suffix}")
     if path.is_dir():
         raise ValueError(f"{what} {path} is a folder: give a file's path, such as {path / ('run' + suffix)}")
-    folder = path.parent if str(path.parent) else Path(".")
-    if folder.exists() and not folder.is_dir():
-        raise ValueError(f"{what} {path}: {folder} is a file, not a folder")
-    missing = [f for f in [folder, *folder.parents] if not f.exists()][::-1]
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise ValueError(f"{what} {path}: cannot make the folder {folder} ({error.strerror})") from None
-    if made is not None:
-        made.extend(missing)
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ValueError(f"{what} {path}: the folder {folder} is not writable; choose another")
+    make_folder(path.parent, f"{what} {path}", made)
     if path.exists() and not force:
         raise ValueError(f"{what} {path} exists: give --force to overwrite it, or another name")
     return path

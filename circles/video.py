@@ -159,7 +159,7 @@ def check_writable(path, fps=None, size=None, made=None):
 
     Makes the missing parent folders (or, for PNG frames, the folder itself), and lists them
     in ``made`` (deepest last) when it is given, so that a caller that stops before writing
-    can take them away (`remove_made`); leaves no other trace. Call it before simulating so
+    can take them away (`command.remove_made`); leaves no other trace. Call it before simulating so
     that a bad path fails at once.
     """
     path = Path(path)
@@ -200,17 +200,6 @@ def check_writable(path, fps=None, size=None, made=None):
         reason = error.strerror or str(error)
         raise OutputError(f"cannot write {path}: {reason}") from None
     return path
-
-
-def remove_made(made):
-    """Remove the folders `check_writable` made (listed in `made`), deepest first, each only
-    if it is still empty."""
-    for folder in reversed(made):
-        try:
-            folder.rmdir()
-        except OSError:
-            pass
-    made.clear()
 
 
 def _ffmpeg_executable():
