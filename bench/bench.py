@@ -479,7 +479,7 @@ def measure_peer(n, reps, target, configs):
     sims = {cfg: circles.Simulation(circles.Scene(n=n, box=box, radius=R, speed=SPEED, boundary="walls",
                                                   scheme=cfg[0], precision=cfg[1], seed=0)) for cfg in configs}
     dt = next((sim.dt for (scheme, _), sim in sims.items() if scheme == "discrete"),
-              circles.simulation.default_dt("discrete", radius, vel))
+              circles.schemes.default_dt("discrete", radius, vel))
     runners = {"pymunk": lambda k: gas.step(dt, k)}
     runners.update({cfg: sim.step for cfg, sim in sims.items()})
     e0 = gas.kinetic_energy()

@@ -342,8 +342,7 @@ def _longest_dt(scene):
     dt is then checked again (`check_step_count`)."""
     import numpy as np
 
-    from .schemes import STEPPERS
-    from .simulation import default_dt
+    from .schemes import STEPPERS, default_dt
 
     if scene.dt is not None:
         return scene.dt

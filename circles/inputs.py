@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from .memory import MOST_RECORDED
-from .scene import (MASS_MODELS, _choice, area_fraction, check_area_fraction, check_count, check_fits, check_scale,
-                    check_speed)
+from .memory import MOST_RECORDED, check_memory
+from .scene import (BOUNDARIES, MASS_MODELS, PRECISIONS, SCHEMES, _choice, area_fraction, check_area_fraction,
+                    check_box, check_count, check_dt, check_fits, check_scale, check_speed)
 from .schemes import STEPPERS
 
 #: Overlap (relative to contact distance) above which from_arrays refuses a configuration.
@@ -185,3 +185,33 @@ def check_record_events(record_events, scheme):
         raise ValueError(f"record_events = {record_events} with scheme {scheme!r}: only the event scheme logs its "
                          "collisions (the discrete scheme resolves overlaps at the end of each step, with no "
                          "time of contact); use scheme='event', or record_events=0")
+
+
+def given_circles(pos, vel, radius, mass, box, boundary, scheme, precision, dt, color, record_events):
+    """The arguments of `Simulation.from_arrays`, checked and made whole: (pos, vel, radius, mass,
+    color, box, dt), radius one per circle, positions in a periodic box wrapped into it."""
+    box = check_box(box)
+    _choice("boundary", boundary, BOUNDARIES)
+    _choice("scheme", scheme, SCHEMES)
+    _choice("precision", precision, PRECISIONS)
+    check_record_events(record_events, scheme)
+    dt = check_dt(dt)
+    pos = real_numbers("pos", pos)
+    vel = real_numbers("vel", vel)
+    radius = real_numbers("radius", radius)
+    if radius.ndim == 0:  # one radius for every circle
+        radius = np.full(pos.shape[0] if pos.ndim == 2 else 1, float(radius))
+    radius = radius.reshape(-1)
+    n = radius.shape[0]
+    if n == 0:
+        raise ValueError("n = 0 circles: give at least one")
+    check_memory(n, scheme, precision, record_events=record_events)
+    check_circles(pos, vel, radius, box, precision)
+    mass = masses_for("radius" if mass is None else mass, radius, precision)
+    # A place given as the result of arithmetic (0.3 - 0.2 for a radius of 0.1) may cross a
+    # wall by its rounding, as a saved one may (`load`).
+    check_placed(pos, radius, box, boundary, place_slack(precision, box))
+    if boundary == "periodic":
+        pos = pos % np.array(box)
+    color = random_colors(n, np.random.default_rng(0)) if color is None else check_colors(color, n)
+    return pos, vel, radius, mass, color, box, dt

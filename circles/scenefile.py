@@ -154,7 +154,7 @@ def circle_list_from_dict(data: dict) -> CircleList:
             color[i] = _color(name, entry["color"])
             has_color[i] = True
 
-    from .simulation import masses_for, place_slack, random_colors
+    from .inputs import masses_for, place_slack, random_colors
 
     _check_inside(pos, radius, box, boundary, place_slack(precision, box))
     _check_no_overlap(pos, radius, box, boundary)
@@ -219,7 +219,7 @@ def _check_inside(pos, radius, box, boundary, slack):
                              f"periodic box {w} x {h}: each side must exceed two diameters "
                              f"({4.0 * r:.6g}); use a smaller circle or a bigger box")
         return
-    from .simulation import outside_walls
+    from .inputs import outside_walls
 
     outside = outside_walls(pos, radius, box, slack)
     if outside.any():
@@ -240,7 +240,7 @@ def _check_no_overlap(pos, radius, box, boundary):
     until every such gap in x exceeds the largest contact distance. On a torus the sweep
     wraps around and gaps are minimum images.
     """
-    from .simulation import INPUT_OVERLAP_TOLERANCE
+    from .inputs import INPUT_OVERLAP_TOLERANCE
 
     n = radius.shape[0]
     w, h = box

@@ -22,16 +22,13 @@ from .backend import compile_for, ensure_init, on_restart, runtime, serial_loops
 from .discrete.contacts import PART_PICKS
 from .discrete.rounds import list_large
 from .event.stepper import SPEED_MARGIN
-from .event.stepper import EVENT_STEP_RADII  # noqa: F401 (the default step, read here)
 from .grid import Grid, count_parts
-from .inputs import (check_circles, check_colors, check_placed, check_record_events, mass_unit, masses_for,
-                     overlap_tolerance, place_slack, random_colors, real_numbers)
-from .inputs import INPUT_OVERLAP_TOLERANCE, outside_walls  # noqa: F401 (the scene files read them here)
+from .inputs import check_record_events, given_circles, mass_unit, overlap_tolerance
 from .interrupts import whole_steps
 from .memory import check_memory
-from .scene import BOUNDARIES, MAX_DT, PRECISIONS, SCHEMES, Scene, _choice, check_box, check_dt
+from .scene import Scene, check_dt
 from .scene import scalar as _scalar
-from .schemes import STEPPERS
+from .schemes import STEPPERS, default_dt
 from .state import State
 from .stepper import like
 from .storage import read_saved, write_saved
@@ -61,20 +58,6 @@ TWO_LEVEL_MAX_FRACTION = 0.05
 
 _REAL = {"f32": ti.f32, "f64": ti.f64}
 _NP_REAL = {"f32": np.float32, "f64": np.float64}
-
-
-def default_dt(scheme, radius, vel):
-    """The step the scheme's stepper chooses for circles of these radii and velocities (1 when
-    none moves)."""
-    vmax = float(np.hypot(vel[:, 0], vel[:, 1]).max()) if len(vel) else 0.0
-    if vmax <= 0:
-        return 1.0
-    dt = STEPPERS[scheme].default_dt(radius, vmax)
-    if not (0 < dt <= MAX_DT):
-        raise ValueError(f"the largest speed {vmax:g} and the radii (mean {float(radius.mean()):g}) give a step "
-                         f"dt = {dt:g}, beyond the steps from 0 to {MAX_DT:g} that a run takes: give dt, or measure "
-                         "lengths and times in other units")
-    return dt
 
 
 def _unpickle(cls, fields, scene, extras):
@@ -124,30 +107,8 @@ class Simulation:
         """A simulation of given circles: pos and vel (n, 2), radius (n,) or one radius for all. mass:
         None (proportional to radius), a model name or (n,) masses."""
         ensure_init()
-        box = check_box(box)
-        _choice("boundary", boundary, BOUNDARIES)
-        _choice("scheme", scheme, SCHEMES)
-        _choice("precision", precision, PRECISIONS)
-        check_record_events(record_events, scheme)
-        dt = check_dt(dt)
-        pos = real_numbers("pos", pos)
-        vel = real_numbers("vel", vel)
-        radius = real_numbers("radius", radius)
-        if radius.ndim == 0:  # one radius for every circle
-            radius = np.full(pos.shape[0] if pos.ndim == 2 else 1, float(radius))
-        radius = radius.reshape(-1)
-        n = radius.shape[0]
-        if n == 0:
-            raise ValueError("n = 0 circles: give at least one")
-        check_memory(n, scheme, precision, record_events=record_events)
-        check_circles(pos, vel, radius, box, precision)
-        mass = masses_for("radius" if mass is None else mass, radius, precision)
-        # A place given as the result of arithmetic (0.3 - 0.2 for a radius of 0.1) may cross a
-        # wall by its rounding, as a saved one may (`load`).
-        check_placed(pos, radius, box, boundary, place_slack(precision, box))
-        if boundary == "periodic":
-            pos = pos % np.array(box)
-        color = random_colors(n, np.random.default_rng(0)) if color is None else check_colors(color, n)
+        pos, vel, radius, mass, color, box, dt = given_circles(pos, vel, radius, mass, box, boundary, scheme,
+                                                               precision, dt, color, record_events)
         sim = cls.__new__(cls)
         sim.scene = None
         sim._setup(pos, vel, radius, mass, color, box, boundary, scheme, precision, dt, record_events)

@@ -45,7 +45,6 @@ the simulation's reordering of its arrays does not matter, and it only reads the
 so a run with a trajectory is the same, bit for bit, as one without.
 """
 
-import os
 from pathlib import Path
 
 import numpy as np

@@ -662,7 +662,7 @@ def test_speeds_beyond_the_arithmetic_and_steps_below_the_clock_are_refused(circ
             setattr(coarse, name, value)
     assert (coarse.dt, coarse.time) == (1.0, 1.0)
     coarse.dt = None  # the scene's choice for the speeds now
-    assert coarse.dt == pytest.approx(circles_cpu.simulation.EVENT_STEP_RADII * 0.1 / 0.1, rel=1e-15)
+    assert coarse.dt == pytest.approx(circles_cpu.event.stepper.EVENT_STEP_RADII * 0.1 / 0.1, rel=1e-15)
     # A periodic box cuts each step to (W/2 - 2 rmax) / (2 vlim), 0.59 s here, below the clock's
     # resolution at 1e16 (2 s), where dt (10 s) is not: advance stopped never.
     torus = circles_cpu.Simulation.from_arrays(pos, np.array([[1.0, 0.0], [0.0, 1.0]]), radius, box=(4.0, 3.0),

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from circles import video
-from circles.video import FrameWriter, OutputError, WriteError, check_writable, output_kind, remove_made
+from circles.command import remove_made
+from circles.video import FrameWriter, OutputError, WriteError, check_writable, output_kind
 
 FPS = 10
 

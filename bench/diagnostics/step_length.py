@@ -53,7 +53,7 @@ def steps_per_copy(scheme, factor, warm, span, rounds):
     """About how many steps a copy at `factor` times the default dt takes, from the scene's largest
     start speed (SPEED's upper end: the default dt it gives is the least, so this is an upper
     estimate), before anything is placed."""
-    dt = factor * circles.simulation.default_dt(scheme, np.full(1, R), np.array([[SPEED[1], 0.0]]))
+    dt = factor * circles.schemes.default_dt(scheme, np.full(1, R), np.array([[SPEED[1], 0.0]]))
     return math.ceil(warm / dt) + rounds * max(1, round(span / dt)), dt
 
 
