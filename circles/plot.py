@@ -2,14 +2,14 @@
 
 Three panels over the simulated time: the kinetic energy; the pressure, from the virial and,
 in a walled box, from the walls; the collision rate (pair collisions a circle takes part in per
-unit time). Drawn with matplotlib, from the ``plot`` extra (``pip install circles[plot]``).
+unit time). Drawn with matplotlib, from the ``plot`` extra (``pip install circles-sim[plot]``).
 """
 import sys
 from pathlib import Path
 
 from .command import EXIT_BAD_INPUT, EXIT_FAILED, Parser, UsageError, make_folder, remove_made
 
-HINT = "circles: error: circles plot needs matplotlib: pip install 'circles[plot]' (or pip install matplotlib)"
+HINT = "circles: error: circles plot needs matplotlib: pip install 'circles-sim[plot]' (or pip install matplotlib)"
 
 
 DESCRIPTION = ("Draw energy, pressure (virial and wall) and collision rate of a stats table (circles run "

@@ -649,7 +649,7 @@ def main(argv):
                 import distributed  # noqa: F401
             except ImportError:
                 raise SweepError("circles sweep runs its tasks on Dask, which is not installed: pip install "
-                                 "'circles[sweep]', or give --workers 0 to run them one by one here") from None
+                                 "'circles-sim[sweep]', or give --workers 0 to run them one by one here") from None
         make_folder(out, f"--out {out}")  # before any cluster starts
     except (UsageError, SweepError) as error:
         print(f"circles: error: {error}", file=sys.stderr)
@@ -694,7 +694,7 @@ def main(argv):
             paths = plot_sweep(sweep, out)
             print(f"plots       {', '.join(paths)}")
         except ImportError:
-            print("plots       skipped: matplotlib is not installed (pip install 'circles[plot]')")
+            print("plots       skipped: matplotlib is not installed (pip install 'circles-sim[plot]')")
         worst = max(deviations(sweep, load_rows(out, sweep)), key=lambda d: abs(d[3]), default=None)
         if worst is not None:
             print(f"liu         largest deviation of Z from Liu's: {100 * worst[3]:+.2f}% ({worst[4]:+.1f} standard "

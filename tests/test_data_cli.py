@@ -110,4 +110,4 @@ def test_plot_without_matplotlib_gives_a_hint(tmp_path):
     done = run_cli(["plot", "run.csv"], tmp_path, python=hide, timeout=60)
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == ["circles: error: circles plot needs matplotlib: pip install "
-                                                "'circles[plot]' (or pip install matplotlib)"]
+                                                "'circles-sim[plot]' (or pip install matplotlib)"]
