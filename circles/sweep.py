@@ -678,7 +678,7 @@ def main(argv):
         print(f"sweep       {total} points x {sweep.repeats} repeats on {where}", flush=True)
         from .kernel_cache import announce
         from .scene import Scene
-        announce(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", threads or 0, stream=sys.stdout)
+        announce(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", threads or 0)
         count = [0]
 
         def on_row(row):

@@ -146,3 +146,15 @@ def test_a_scene_file_given_to_sweep_is_named_as_one(tmp_path, capsys, monkeypat
     assert cli.main(["sweep", "scene.toml"]) == 2
     line = capsys.readouterr().err.strip()
     assert "scene.toml is a scene file" in line and "circles run" in line
+
+
+def test_a_first_run_says_once_on_stderr_that_kernels_compile(tmp_path):
+    """Not a terminal (a pipe), an empty Taichi cache: the notice comes once, then not again."""
+    args = ["run", "--n", "20", "--box", "3", "3", "--radius", "0.1", "--duration", "0.2", "--out", "none",
+            "--arch", "cpu"]
+    cache = {"TI_OFFLINE_CACHE_FILE_PATH": str(tmp_path / "cache")}
+    first = run_cli(args, tmp_path, extra_env=cache, timeout=300)
+    assert first.returncode == 0, first.stderr
+    assert first.stderr.splitlines().count(MESSAGE) == 1
+    again = run_cli(args, tmp_path, extra_env=cache, timeout=300)
+    assert again.returncode == 0 and MESSAGE not in again.stderr
