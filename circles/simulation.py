@@ -529,8 +529,10 @@ class Simulation:
         velocities); virial, the sum over pair collisions of (r_i + r_j) |J| (J the impulse), and
         wall_impulse, the sum over wall hits of 2 m |v_n|, from which pressures follow: over a
         time t, the walls' P = delta wall_impulse / (t perimeter), and in 2D P A = N kT +
-        delta virial / (2 t) with N kT the kinetic energy (the centres' box, W - 2r by H - 2r,
-        in a walled box); max_overlap, the largest overlap of two circles as a fraction of
+        delta virial / (2 t) (the centres' box, W - 2r by H - 2r, in a walled box); temperature,
+        kT: the kinetic energy over N in a walled box, and in a periodic box, which conserves
+        its momentum, the kinetic energy in the centre-of-mass frame over N - 1
+        (`observables.temperature`); max_overlap, the largest overlap of two circles as a fraction of
         their contact distance; pressure, compressibility (Z = P A / (N kT)) and wall_pressure,
         averaged since time 0 (NaN at time 0, wall_pressure NaN in a periodic box: see
         `circles.observables`)."""
@@ -548,6 +550,8 @@ class Simulation:
             "wall_impulse": float(np.sum(wall_impulse)),
             "max_overlap": self._max_overlap(),
         }
+        stats["temperature"] = observables.temperature(stats["kinetic_energy"], stats["momentum"], float(np.sum(m)),
+                                                       self.n, self.boundary)
         stats.update(observables.since_start(stats, self.n, self.box, self.boundary, float(np.mean(self._radius))))
         stats.update(self.stepper.stats())
         return stats

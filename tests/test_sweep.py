@@ -7,6 +7,7 @@ The worker processes start Taichi themselves and share the offline cache of this
 """
 
 import csv
+import math
 import json
 import os
 import signal
@@ -215,3 +216,57 @@ def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys)
     assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
     assert f"the Dask scheduler at {address}" in capsys.readouterr().out
     assert table(out) == table(serial_out)
+
+
+# ---- statistics and reruns, against numbers worked out here -------------------------------
+
+def test_a_rerun_runs_exactly_the_points_results_csv_lacks(serial, tmp_path):
+    """A folder whose results.csv holds the first and last points but not the middle one (as a
+    stop can leave with tasks finishing out of order): the rerun runs the middle point alone,
+    and the table ends as the serial one."""
+    import shutil
+
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    shutil.copytree(serial_out, out)
+    with open(out / "results.csv", newline="") as file:
+        rows = list(csv.reader(file))
+    header, body = rows[0], rows[1:]
+    kept = [row for row in body if row[header.index("area_fraction")] != "0.3"]
+    assert len(kept) == 2
+    with open(out / "results.csv", "w", newline="") as file:
+        csv.writer(file).writerows([header, *kept])
+    run = sweeps.run_sweep(sweep, out)
+    assert run.ran == [1] and run.skipped == [0, 2]
+    assert sorted(run.results) == [(1, r) for r in range(sweep.repeats)]
+    assert table(out) == table(serial_out)
+
+
+def test_a_points_mean_and_standard_error_over_every_block_of_every_repeat(serial):
+    sweep, _ = serial
+    blocks = {"compressibility": [[1.0, 2.0], [3.0, 4.0]], "collision_rate": [[5.0, 5.0], [5.0, 9.0]],
+              "energy_change": [[0.0, 0.0], [0.0, 0.0]], "temperature": [[0.5, 0.5], [0.5, 0.5]]}
+    results = [{"blocks": {k: v[r] for k, v in blocks.items()}, "pair_collisions": 10 + r, "seconds": 1.0}
+               for r in range(2)]
+    row = sweeps.point_row(sweep, 0, results)
+    # Four blocks 1, 2, 3, 4: mean 2.5, sample variance 5/3, standard error sqrt(5/3) / 2.
+    assert float(row["compressibility"]) == 2.5
+    assert float(row["compressibility_se"]) == pytest.approx(math.sqrt(5 / 3) / 2, rel=1e-14)
+    # 5, 5, 5, 9: mean 6, sample variance 16/3, standard error sqrt(16/3) / 2.
+    assert float(row["collision_rate"]) == 6.0
+    assert float(row["collision_rate_se"]) == pytest.approx(math.sqrt(16 / 3) / 2, rel=1e-14)
+    assert float(row["temperature_se"]) == 0.0 and row["pair_collisions"] == 21
+
+
+def test_each_repeat_of_a_point_runs_its_own_seed(serial):
+    """The seed of repeat r is numpy's SeedSequence of (base seed, r), worked out here, and the
+    repeats' runs differ."""
+    import numpy as np
+
+    sweep, _ = serial
+    expect = [int(np.random.SeedSequence([3, r]).generate_state(1, dtype=np.uint32)[0]) for r in range(3)]
+    for point in range(len(sweep.points)):
+        assert [sweep.point_scene(point, r)["seed"] for r in range(3)] == expect
+    first, second = (sweeps.run_task(sweep.point_scene(0, r), 0.0, 0.5, 1) for r in range(2))
+    assert first["pair_collisions"] != second["pair_collisions"] or \
+        first["blocks"]["compressibility"] != second["blocks"]["compressibility"]

@@ -23,12 +23,13 @@ def test_gsd_frames_equal_the_state(circles_cpu, tmp_path, boundary):
     sim = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(3.0, 2.0), radius=(0.05, 0.1), speed=(0.5, 1.0),
                                                    boundary=boundary, seed=4))
     path = tmp_path / "run.gsd"
-    states, stats = [], []
+    states, stats, steps = [], [], []
     with GSDWriter(path) as writer:
         for _ in range(3):
             writer.write(sim)
             states.append(sim.state())
             stats.append(sim.stats())
+            steps.append(sim.steps)
             sim.advance(0.3)
     w, h = sim.box
     with gsd.hoomd.open(str(path)) as traj:
@@ -38,7 +39,9 @@ def test_gsd_frames_equal_the_state(circles_cpu, tmp_path, boundary):
             assert frame.configuration.dimensions == 2
             assert list(frame.configuration.box) == [3.0, 2.0, 0, 0, 0, 0]
             assert frame.particles.N == 50
-            assert frame.configuration.step == round(k * 0.3 / sim.dt) or frame.configuration.step >= 0
+            # The steps taken when the frame was written: 0, then at least the steps of 0.3 s.
+            assert frame.configuration.step == steps[k]
+            assert steps[k] >= math.ceil(k * 0.3 / sim.dt - 1e-9)
             np.testing.assert_array_equal(frame.particles.position[:, 0], (s.pos[:, 0] - w / 2).astype(np.float32))
             np.testing.assert_array_equal(frame.particles.position[:, 1], (s.pos[:, 1] - h / 2).astype(np.float32))
             assert np.all(frame.particles.position[:, 2] == 0)

@@ -1,0 +1,117 @@
+"""The observables against numbers worked out by hand from their definitions (`circles.observables`),
+not against another path through the same code: the temperature from the kinetic energy and the
+degrees of freedom, P = Z N kT / A with the right area, the wall pressure from the wall impulse
+over the open perimeter, a row's values over its interval alone. Then the same identities in a
+real run: the walls' pressure and the virial's agree in a small walled box whose area with or
+without a radius at each wall differs by many standard errors."""
+
+import math
+
+import numpy as np
+import pytest
+
+from circles import observables
+from circles.writers import Run, StatsWriter, read_stats
+
+# A hand-made pair of stats: 5 circles, box 4 x 3, mean radius 0.5, an interval from t = 1 to
+# t = 3 in which the virial grows by 40 and the wall impulse by 60.
+BEFORE = dict(time=1.0, kinetic_energy=12.0, momentum=(0.0, 0.0), pair_collisions=7, wall_collisions=2,
+              virial=10.0, wall_impulse=15.0, max_overlap=0.0)
+AFTER = dict(time=3.0, kinetic_energy=10.0, momentum=(1.0, 2.0), pair_collisions=27, wall_collisions=9,
+             virial=50.0, wall_impulse=75.0, max_overlap=0.0)
+N, BOX, R, TOTAL_MASS = 5, (4.0, 3.0), 0.5, 10.0
+
+
+def with_temperature(stats, boundary):
+    return dict(stats, temperature=observables.temperature(stats["kinetic_energy"], stats["momentum"], TOTAL_MASS,
+                                                           N, boundary))
+
+
+def test_temperature_counts_the_degrees_of_freedom():
+    # Walls: 2 degrees of freedom a circle, kT = K / N.
+    assert observables.temperature(10.0, (1.0, 2.0), TOTAL_MASS, N, "walls") == 2.0
+    # Periodic: the centre of mass holds |P|^2 / 2M = 5 / 20 = 0.25; 2(N - 1) degrees are left.
+    assert observables.temperature(10.0, (1.0, 2.0), TOTAL_MASS, N, "periodic") == pytest.approx(9.75 / 4, rel=1e-15)
+    assert math.isnan(observables.temperature(1.0, (0.5, 0.0), 1.0, 1, "periodic"))
+
+
+def test_a_walled_rows_pressures_use_the_area_and_perimeter_open_to_the_centres():
+    row = observables.interval(with_temperature(BEFORE, "walls"), with_temperature(AFTER, "walls"), N, BOX, "walls", R)
+    # Open to the centres: 3 x 2 (area 6, perimeter 10); over t = 2, kT = 2, N kT = 10.
+    assert row["compressibility"] == pytest.approx(1 + 40 / (2 * 2 * 10), rel=1e-15)  # 2.0
+    assert row["pressure"] == pytest.approx(2.0 * 10 / 6, rel=1e-15)
+    assert row["wall_pressure"] == pytest.approx(60 / (2 * 10), rel=1e-15)  # 3.0
+    assert row["temperature"] == 2.0
+    assert row["collision_rate"] == pytest.approx(2 * 20 / (N * 2), rel=1e-15)
+    assert (row["pair_collisions"], row["wall_collisions"], row["time"]) == (27, 9, 3.0)  # totals at the end
+
+
+def test_a_periodic_rows_pressure_uses_the_whole_box_and_the_centre_of_mass_frame():
+    row = observables.interval(with_temperature(BEFORE, "periodic"), with_temperature(AFTER, "periodic"), N, BOX,
+                               "periodic", R)
+    kT = 9.75 / 4
+    # P A = N kT + virial / 2t over the box's own area 12.
+    assert row["pressure"] == pytest.approx((N * kT + 40 / 4) / 12, rel=1e-15)
+    assert row["compressibility"] == pytest.approx(1 + 40 / (4 * N * kT), rel=1e-15)
+    assert math.isnan(row["wall_pressure"])
+
+
+def test_a_row_holds_its_interval_alone_and_the_totals_since_the_start():
+    start = dict(BEFORE, time=0.0, virial=0.0, wall_impulse=0.0, pair_collisions=0)
+    walls = [with_temperature(s, "walls") for s in (start, BEFORE, AFTER)]
+    first = observables.interval(walls[0], walls[1], N, BOX, "walls", R)
+    second = observables.interval(walls[1], walls[2], N, BOX, "walls", R)
+    # The first interval, t = 0 to 1: virial 10, wall impulse 15, 7 collisions, kT 12 / 5.
+    assert first["compressibility"] == pytest.approx(1 + 10 / (2 * 1 * 12), rel=1e-15)
+    assert first["wall_pressure"] == pytest.approx(15 / (1 * 10), rel=1e-15)
+    assert first["collision_rate"] == pytest.approx(2 * 7 / (N * 1), rel=1e-15)
+    # The second, t = 1 to 3, not 0 to 3: virial 40, not 50.
+    assert second["compressibility"] == pytest.approx(2.0, rel=1e-15)
+    since = observables.since_start(walls[2], N, BOX, "walls", R)
+    assert since["compressibility"] == pytest.approx(1 + 50 / (2 * 3 * 10), rel=1e-15)
+    assert since["wall_pressure"] == pytest.approx(75 / (3 * 10), rel=1e-15)
+
+
+def test_no_pressure_over_no_time():
+    row = observables.interval(with_temperature(AFTER, "walls"), with_temperature(AFTER, "walls"), N, BOX, "walls", R)
+    assert all(math.isnan(row[k]) for k in ("pressure", "compressibility", "wall_pressure", "collision_rate"))
+
+
+def test_simulation_temperature_in_the_centre_of_mass_frame(circles_cpu):
+    """A periodic box given a drift: the temperature is that of the motion about the centre of
+    mass, over N - 1, computed here from the velocities; walls keep K / N."""
+    rng = np.random.default_rng(4)
+    n = 30
+    pos = np.stack(np.meshgrid(np.arange(6) + 0.5, np.arange(5) + 0.5), -1).reshape(-1, 2)
+    vel = rng.normal(size=(n, 2)) + [3.0, -1.0]
+    mass = rng.uniform(1.0, 2.0, n)
+    for boundary in ("periodic", "walls"):
+        sim = circles_cpu.Simulation.from_arrays(pos, vel, 0.2, mass=mass, box=(6.0, 5.0), boundary=boundary)
+        st = sim.stats()
+        centre = (mass[:, None] * vel).sum(0) / mass.sum()
+        kinetic = 0.5 * np.sum(mass[:, None] * vel ** 2)
+        about = 0.5 * np.sum(mass[:, None] * (vel - centre) ** 2)
+        expect = about / (n - 1) if boundary == "periodic" else kinetic / n
+        assert st["temperature"] == pytest.approx(expect, rel=1e-12)
+
+
+def test_walls_and_virial_give_one_pressure_in_a_small_walled_box(circles_cpu, tmp_path):
+    """36 disks of radius 0.5 in a 7 x 7 box: the area open to the centres, 6 x 6, is 27%
+    below the box's, and a radius off the area (6.5 x 6.5) moves the virial's pressure by 17%.
+    Over 40 intervals of 2 time units the difference between the two pressures has a standard
+    error of about 1%, so either mistake shows by many standard errors."""
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=36, box=(7.0, 7.0), radius=0.5, speed=(1.0, 1.0),
+                                                   mass="equal", seed=11))
+    sim.advance(20.0)
+    with StatsWriter(tmp_path / "walls.csv") as table:
+        for _ in Run(sim, 80.0, 0.5, at_interval=[table]):
+            pass
+    rows = read_stats(tmp_path / "walls.csv")
+    virial, wall = rows["pressure"], rows["wall_pressure"]
+    difference = wall - virial
+    se = np.std(difference, ddof=1) / math.sqrt(difference.size)
+    mean_p = float(np.mean(virial))
+    assert se < 0.03 * mean_p  # resolving a 17% error by far
+    assert abs(np.mean(difference)) < 4 * se, (np.mean(wall), mean_p, se)
+    # The identity P = Z N kT / A, row by row, with A the open area.
+    np.testing.assert_allclose(virial, rows["compressibility"] * 36 * rows["temperature"] / 36.0, rtol=1e-12)
