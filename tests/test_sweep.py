@@ -252,9 +252,10 @@ def test_a_points_mean_and_standard_error_over_every_block_of_every_repeat(seria
     # Four blocks 1, 2, 3, 4: mean 2.5, sample variance 5/3, standard error sqrt(5/3) / 2.
     assert float(row["compressibility"]) == 2.5
     assert float(row["compressibility_se"]) == pytest.approx(math.sqrt(5 / 3) / 2, rel=1e-14)
-    # 5, 5, 5, 9: mean 6, sample variance 16/3, standard error sqrt(16/3) / 2.
+    # 5, 5, 5, 9: mean 6, squared deviations 1 + 1 + 1 + 9 = 12, sample variance 4, standard
+    # error 2 / 2 (with N in place of N - 1 it would be sqrt(3) / 2).
     assert float(row["collision_rate"]) == 6.0
-    assert float(row["collision_rate_se"]) == pytest.approx(math.sqrt(16 / 3) / 2, rel=1e-14)
+    assert float(row["collision_rate_se"]) == pytest.approx(1.0, rel=1e-14)
     assert float(row["temperature_se"]) == 0.0 and row["pair_collisions"] == 21
 
 
