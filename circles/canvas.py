@@ -64,7 +64,7 @@ from taichi.lang import impl
 
 from .backend import on_restart
 
-COLOR_MODES = ("random", "speed")
+COLOR_MODES = ("random", "speed", "hexatic")
 MAX_IMAGE_SIDE = 16384
 # Colour of the letterbox margin outside the box, as a fraction of the background.
 MARGIN_SHADE = 0.55
@@ -784,7 +784,9 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
       color: (n, 3) uint8, each circle's colour (used by "random").
       box: (W, H), the box size in world units.
       width, height: image size in pixels, 1 to 16384.
-      color_mode: "random" (each circle's own colour) or "speed" (viridis of |v|).
+      color_mode: "random" (each circle's own colour), "speed" (viridis of |v|) or "hexatic"
+        (the orientation of each circle's local psi_6 as a hue, its modulus as brightness:
+        `circles.order.hexatic_colors`).
       background: RGB of the inside of the box; the margin outside is darker.
       speed_scale: the speed shown at the top of the colormap; by default twice the rms
         speed of this frame. Pass a fixed value to keep colours fixed over a run.
@@ -814,6 +816,9 @@ def render(pos, vel, radius, color, box, width=1280, height=720, color_mode="ran
         color = check_colors(color, n)
     else:
         color = np.ascontiguousarray(color, dtype=np.uint8)
+    if color_mode == "hexatic":
+        from .order import hexatic_colors, psi6
+        color = hexatic_colors(psi6(pos, (box_w, box_h), bool(periodic)))
     # World lengths in units of a power of two near the box's side (an exact scaling), so that
     # a box of any size draws in the float32 of the kernels.
     exponent = math.frexp(max(box_w, box_h))[1]

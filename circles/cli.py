@@ -109,6 +109,12 @@ def _build_parser():
     scene.add_argument("--precision", choices=("f32", "f64"))
     scene.add_argument("--dt", type=float, help="step length in simulated seconds")
     scene.add_argument("--seed", type=int)
+    scene.add_argument("--crystal", type=int, nargs=2, metavar=("NX", "NY"),
+                       help="a triangular crystal's columns and rows (NY even): n = NX NY equal circles in the "
+                            "periodic box of aspect NX : NY sqrt(3)/2 that it fits, sized by --area-fraction")
+    scene.add_argument("--start", choices=("fluid", "crystal"),
+                       help="fluid: circles placed at random (the default); crystal: on the perfect crystal of "
+                            "--crystal")
     output = run.add_argument_group("run")
     output.add_argument("--duration", type=float, metavar="T",
                         help=f"simulated seconds (default {RUN_DEFAULTS['duration']:g})")
@@ -116,8 +122,9 @@ def _build_parser():
                         help=f"frames per simulated second (default {RUN_DEFAULTS['fps']:g})")
     output.add_argument("--size", metavar="WxH",
                         help=f"image size in pixels (default {RUN_DEFAULTS['size']})")
-    output.add_argument("--color", choices=("random", "speed"),
-                        help="each circle's own colour, or a colormap of its speed")
+    output.add_argument("--color", choices=("random", "speed", "hexatic"),
+                        help="each circle's own colour, a colormap of its speed, or the orientation of its "
+                             "hexatic order psi_6 (circles.order)")
     output.add_argument("--arch", choices=("auto", "cpu", "gpu"), help="where to run")
     output.add_argument("--threads", type=int, metavar="N",
                         help="CPU threads to run on (default 0: all of them; the state does not "
@@ -172,12 +179,14 @@ def _scene_defaults_text():
 
 def _scene_overrides(args):
     overrides = {}
-    for key in ("n", "mass", "boundary", "scheme", "precision", "dt", "seed"):
+    for key in ("n", "mass", "boundary", "scheme", "precision", "dt", "seed", "start"):
         value = getattr(args, key)
         if value is not None:
             overrides[key] = value
     if args.box is not None:
         overrides["box"] = list(args.box)
+    if args.crystal is not None:
+        overrides["crystal"] = list(args.crystal)
     for key in ("radius", "speed"):
         values = getattr(args, key)
         if values is not None:
@@ -311,7 +320,7 @@ def check_frame_count(duration, fps):
 
 
 #: Flags that shape a random scene only: refused with a file that lists its circles.
-RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed", "area_fraction")
+RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed", "area_fraction", "crystal", "start")
 
 
 def _sized_scene_fields(fields, overrides, args):
@@ -324,6 +333,14 @@ def _sized_scene_fields(fields, overrides, args):
     merged = {**fields, **overrides}
     if "box" in overrides:
         merged.pop("area_fraction", None)
+    if merged.get("crystal") is not None:
+        # The crystal fixes n and the box's aspect; Scene makes the box from the area fraction.
+        if "crystal" in overrides and "n" not in overrides:
+            merged.pop("n", None)
+        if args.area_fraction is not None:
+            merged.pop("box", None)
+            merged["area_fraction"] = args.area_fraction
+        return merged
     phi = args.area_fraction
     if phi is None and not args.scene and "n" in overrides and not {"box", "radius"} & set(overrides):
         phi = Scene.from_dict(SHOWCASE_SCENE).area_fraction
@@ -359,7 +376,7 @@ def _circle_list(path, fields, args):
     for key in RANDOM_SCENE_FLAGS:
         if getattr(args, key) is not None:
             raise UsageError(f"argument --{key.replace('_', '-')} does not apply to {path}: it lists its circles "
-                             "([[circle]] entries), and --n, --radius, --speed, --seed and --area-fraction only "
+                             "([[circle]] entries), and --n, --radius, --speed, --seed, --area-fraction, --crystal and --start only "
                              "shape random scenes: drop the flag or edit the file")
     try:
         return circle_list_from_dict({**fields, **_scene_overrides(args)})

@@ -13,6 +13,7 @@ from numbers import Integral, Real
 import numpy as np
 
 MASS_MODELS = ("radius", "area", "equal")
+STARTS = ("fluid", "crystal")
 BOUNDARIES = ("walls", "periodic")
 SCHEMES = ("event", "discrete")
 PRECISIONS = ("f32", "f64")
@@ -299,6 +300,11 @@ class Scene:
     default), "area" (m = pi r^2) or "equal" (m = 1). boundary: "walls" or "periodic".
     scheme: "event" (exact) or "discrete" (fast, approximate). precision: "f32" or "f64".
     dt: step length in simulated seconds, None to choose it from the scene. seed: int.
+    crystal: (nx, ny), the columns and rows of a triangular crystal of equal disks in a periodic
+    box: n = nx ny, ny even, and the box of aspect nx : ny sqrt(3)/2 that the crystal fits
+    exactly (from area_fraction, or a box of that aspect). start: "fluid" (circles placed at
+    random, `circles.placement`) or "crystal" (on the perfect crystal; needs crystal). Both
+    starts of one crystal shape share the box, so runs from each can be set side by side.
     """
 
     n: int = 10_000
@@ -312,6 +318,8 @@ class Scene:
     dt: float | None = None
     seed: int = 0
     area_fraction: float | None = None
+    crystal: tuple | None = None
+    start: str = "fluid"
 
     def __post_init__(self):
         object.__setattr__(self, "n", scalar(self.n))
@@ -320,6 +328,8 @@ class Scene:
         if self.n <= 0:
             raise ValueError(f"n = {self.n} must be > 0")
         rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
+        _choice("start", self.start, STARTS)
+        crystal = self._crystal_of(rlo, rhi)
         box = self._box_of(rlo, rhi)
         vlo, vhi = check_pair_range("speed", self.speed, lambda v: v >= 0)
         _choice("mass model", self.mass, MASS_MODELS, " (masses of your own go to Simulation.from_arrays)")
@@ -339,14 +349,58 @@ class Scene:
         object.__setattr__(self, "speed", (vlo, vhi))
         object.__setattr__(self, "dt", dt)
         object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "crystal", crystal)
         object.__setattr__(self, "area_fraction", self.expected_area_fraction_of(self.n, box, rlo, rhi))
 
+    def _crystal_of(self, rlo, rhi):
+        """(nx, ny) checked, or None; refuses a crystal start without a crystal."""
+        if self.crystal is None:
+            if self.start == "crystal":
+                raise ValueError("start = 'crystal' needs the crystal's shape: give crystal = [nx, ny], its columns "
+                                 "and rows (n = nx ny, ny even)")
+            return None
+        shape = self.crystal
+        if not isinstance(shape, (tuple, list)) or len(shape) != 2:
+            raise ValueError(f"crystal = {shape!r} must be [nx, ny]: the columns and rows of the triangular crystal")
+        nx, ny = (check_count(f"crystal[{k}]", value) for k, value in enumerate(shape))
+        if nx < 1 or ny < 2 or ny % 2:
+            raise ValueError(f"crystal = [{nx}, {ny}]: give nx >= 1 columns and an even number ny >= 2 of rows (a "
+                             "periodic box stacks the rows of a triangular crystal in pairs)")
+        if self.n != nx * ny:
+            raise ValueError(f"n = {self.n} but crystal = [{nx}, {ny}] holds {nx * ny} circles: give n = {nx * ny} "
+                             "(a scene file or sweep file may leave n out)")
+        if rhi != rlo:
+            raise ValueError(f"crystal = [{nx}, {ny}] with radii from {rlo:g} to {rhi:g}: a crystal is of equal "
+                             "circles; give one radius")
+        if self.boundary != "periodic":
+            raise ValueError(f"crystal = [{nx}, {ny}] in a box with {self.boundary}: the crystal fills a periodic "
+                             "box; give boundary = 'periodic'")
+        return nx, ny
+
+    def crystal_aspect(self):
+        """Width over height of the box a crystal of `crystal` columns and rows fits: nx / (ny sqrt(3)/2)."""
+        nx, ny = self.crystal
+        return nx / (ny * math.sqrt(3.0) / 2.0)
+
     def _box_of(self, rlo, rhi):
-        """The box given, the box made for the area fraction given, or DEFAULT_BOX."""
+        """The box given, the box made for the area fraction given, or DEFAULT_BOX; for a crystal,
+        of the crystal's aspect."""
         if self.area_fraction is None:
-            return check_box(DEFAULT_BOX if self.box is None else self.box)
+            if self.crystal is not None and self.box is None:
+                raise ValueError(f"crystal = {list(self.crystal)!r}: give area_fraction (the box is then made of "
+                                 "the crystal's aspect) or a box of aspect nx : ny sqrt(3)/2")
+            box = check_box(DEFAULT_BOX if self.box is None else self.box)
+            if self.crystal is not None:
+                aspect = self.crystal_aspect()
+                if not math.isclose(box[0] / box[1], aspect, rel_tol=1e-9):
+                    raise ValueError(f"box = {list(box)!r} has aspect {box[0] / box[1]:.9g}, and crystal = "
+                                     f"{list(self.crystal)!r} fits a box of aspect {aspect:.9g} (nx : ny sqrt(3)/2): "
+                                     "give area_fraction in place of the box, or a box of that aspect")
+            return box
         fraction = check_area_fraction_value(self.area_fraction)
         if self.box is None:
+            if self.crystal is not None:
+                return box_for_area_fraction(self.n, (rlo, rhi), fraction, self.crystal_aspect())
             return box_for_area_fraction(self.n, (rlo, rhi), fraction)
         box = check_box(self.box)
         held = self.expected_area_fraction_of(self.n, box, rlo, rhi)
@@ -367,6 +421,10 @@ class Scene:
         d["radius"] = list(self.radius)
         d["speed"] = list(self.speed)
         del d["area_fraction"]  # the box says it
+        if self.crystal is None:
+            del d["crystal"]
+        else:
+            d["crystal"] = list(self.crystal)
         return d
 
     @classmethod
@@ -383,7 +441,10 @@ class Scene:
             raise ValueError(f"box = {d['box']!r} and area_fraction = {d['area_fraction']!r} are both given: give "
                              "one of them (area_fraction makes a box of aspect 16:9 for the circles)")
         kw = dict(d)
-        for key in ("box", "radius", "speed"):
+        if kw.get("crystal") is not None and "n" not in kw and isinstance(kw["crystal"], (list, tuple)) \
+                and len(kw["crystal"]) == 2 and all(isinstance(v, int) for v in kw["crystal"]):
+            kw["n"] = kw["crystal"][0] * kw["crystal"][1]
+        for key in ("box", "radius", "speed", "crystal"):
             if isinstance(kw.get(key), list):
                 kw[key] = tuple(kw[key])
         return cls(**kw)

@@ -87,6 +87,7 @@ def test_serial_sweep_measures_the_hard_disk_fluid(serial):
         assert abs(float(row[NUMBERS.index("energy_change")])) < 1e-13
 
 
+@pytest.mark.cluster
 def test_local_cluster_gives_the_serial_numbers(serial, cluster, tmp_path):
     sweep, serial_out = serial
     run = sweeps.run_sweep(sweep, tmp_path / "out", client=cluster, threads=1)
@@ -95,6 +96,7 @@ def test_local_cluster_gives_the_serial_numbers(serial, cluster, tmp_path):
     assert table(tmp_path / "out") == table(serial_out)
 
 
+@pytest.mark.cluster
 def test_a_stopped_sweep_run_again_runs_only_the_missing_points(serial, cluster, tmp_path):
     sweep, serial_out = serial
     out = tmp_path / "out"
@@ -118,6 +120,7 @@ def test_a_stopped_sweep_run_again_runs_only_the_missing_points(serial, cluster,
     assert again.ran == [] and again.results == {}
 
 
+@pytest.mark.cluster
 def test_a_worker_killed_mid_sweep_loses_no_point(serial, cluster, tmp_path):
     """The worker busy with a task is killed after the first task ends; the nanny starts a
     new one and the scheduler gives its task to a live worker: every point completes, with the
@@ -190,6 +193,7 @@ def test_repeat_seeds_are_distinct_and_fixed_by_the_base_seed():
     assert sweeps.repeat_seed(4, 0) not in seeds
 
 
+@pytest.mark.cluster
 def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys):
     """`circles sweep` end to end: its own cluster of two workers, the serial numbers, a plot per
     observable, and Liu's deviation said; run again, every point is skipped."""
@@ -207,6 +211,26 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
     assert "0 points run, 3 already in" in capsys.readouterr().out
 
 
+def test_the_command_runs_a_sweep_in_this_process_and_plots_it(serial, tmp_path, capsys):
+    """`circles sweep --workers 0`: the tasks one by one here, the serial numbers, a plot per
+    observable, Liu's deviation said and the rerun skipping every point."""
+    sweep, serial_out = serial
+    path = write(tmp_path, TINY)
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "this process, task by task" in said and "3 points run, 0 already in" in said
+    assert said.count("point       area_fraction") == 3
+    worst = max(sweeps.deviations(sweep, sweeps.load_rows(out, sweep)), key=lambda d: abs(d[3]))
+    assert f"{100 * worst[3]:+.2f}% ({worst[4]:+.1f} standard errors) at area fraction {worst[0]:g}" in said
+    assert table(out) == table(serial_out)
+    for name in sweep.observables:
+        assert (out / f"{name}.png").stat().st_size > 10_000
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    assert "0 points run, 3 already in" in capsys.readouterr().out
+
+
+@pytest.mark.cluster
 def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys):
     """--scheduler ADDRESS: the tasks go to that cluster's workers, Taichi on each worker's own
     thread count, and the numbers are the serial ones."""

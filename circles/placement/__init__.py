@@ -186,7 +186,8 @@ def _stalled_message(stalled, radius, box, periodic, single, fraction):
 def scene_circles(scene):
     """(pos, vel, radius, mass, color) of the circles of `scene`: radii, speeds, directions and
     colours drawn from its seed, masses from its mass model, places at random without overlap
-    (`place`); the area fraction is checked before any is placed."""
+    (`place`), or on the perfect crystal for a crystal start; the area fraction is checked
+    before any is placed."""
     rng = np.random.default_rng(scene.seed)
     n = scene.n
     (rlo, rhi), (vlo, vhi) = scene.radius, scene.speed
@@ -199,5 +200,9 @@ def scene_circles(scene):
     fraction = area_fraction(radius, scene.box)
     check_area_fraction(fraction, n, scene.box)
     periodic = scene.boundary == "periodic"
-    pos = place(radius, scene.box, periodic, scene.seed, rng, single=scene.precision == "f32")
+    if scene.start == "crystal":
+        from .lattice import crystal_positions
+        pos = crystal_positions(*scene.crystal, scene.box)
+    else:
+        pos = place(radius, scene.box, periodic, scene.seed, rng, single=scene.precision == "f32")
     return pos, vel, radius, mass, color

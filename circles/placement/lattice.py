@@ -138,3 +138,15 @@ def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Gen
                                  "fewer or smaller circles, a narrower spread of radii, or a bigger box") from None
             scale *= 0.98
     raise AssertionError("unreachable")
+
+
+def crystal_positions(nx, ny, box):
+    """The centres of a perfect triangular crystal of nx columns and ny rows (ny even) filling a
+    periodic box of aspect nx : ny sqrt(3)/2: rows ny / H apart, every other row shifted by half
+    a spacing, in row order."""
+    w, h = float(box[0]), float(box[1])
+    a, b = w / nx, h / ny
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    x = (i + 0.25 + 0.5 * (j % 2)) * a
+    y = (j + 0.5) * b
+    return np.stack([x.ravel(), y.ravel()], axis=1)
