@@ -115,3 +115,59 @@ def test_walls_and_virial_give_one_pressure_in_a_small_walled_box(circles_cpu, t
     assert abs(np.mean(difference)) < 4 * se, (np.mean(wall), mean_p, se)
     # The identity P = Z N kT / A, row by row, with A the open area.
     np.testing.assert_allclose(virial, rows["compressibility"] * 36 * rows["temperature"] / 36.0, rtol=1e-12)
+
+
+class _Frames:
+    """A frame writer that records what it is given."""
+
+    def __init__(self, wants_row=True):
+        self.wants_row = wants_row
+        self.got = []
+
+    def write(self, *args):
+        if len(args) == 1:  # an interval writer: the row alone
+            self.got.append(args[0])
+        else:
+            sim, row, stats = args
+            self.got.append((sim.time, row, stats))
+
+
+def test_a_run_gives_each_frame_the_row_of_the_interval_that_ended_then(circles_cpu):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(3.0, 3.0), radius=0.1, seed=2))
+    frames, rows = _Frames(), []
+
+    class Table:
+        def write(self, row):
+            rows.append(row)
+
+    for _ in Run(sim, 1.0, 4, at_frame=[frames], at_interval=[Table()]):
+        pass
+    times = [t for t, _, _ in frames.got]
+    assert times == [0.0, 0.25, 0.5, 0.75] and len(rows) == 4
+    assert frames.got[0][1]["time"] == 0.0 and math.isnan(frames.got[0][1]["pressure"])
+    for k in range(1, 4):
+        assert frames.got[k][1] is rows[k - 1]  # frame k: the row of the interval ending at its instant
+        assert frames.got[k][2]["time"] == times[k]  # and the stats taken then
+
+
+def test_a_run_takes_no_stats_when_no_writer_needs_them(circles_cpu, monkeypatch):
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(3.0, 3.0), radius=0.1, seed=2))
+    calls = []
+    original = type(sim).stats
+    monkeypatch.setattr(type(sim), "stats", lambda self: calls.append(1) or original(self))
+    video = _Frames(wants_row=False)
+    run = Run(sim, 0.5, 4, at_frame=[video])
+    for _ in run:
+        pass
+    assert calls == [] and not run.need_stats
+    assert all(row is None and stats is None for _, row, stats in video.got)
+    measuring = Run(sim, 0.5, 4, at_frame=[_Frames(wants_row=False)], at_interval=[_Frames()])
+    assert measuring.need_stats and len(calls) == 1  # the stats at the start
+    assert Run(sim, 0.5, 4, at_frame=[_Frames()]).need_stats  # a frame writer that wants rows
+
+    class Plain:  # a writer that does not say: it gets rows
+        def write(self, sim, row, stats):
+            pass
+
+    assert Run(sim, 0.5, 4, at_frame=[Plain()]).need_stats
+    assert not Run(sim, 0.5, 4, at_frame=[_Frames()], need_stats=False).need_stats
