@@ -20,10 +20,9 @@ _restart_hooks = []
 _recompile_hooks = []
 
 #: From this many circles up, kernels on a CPU compile with Taichi's CFG optimisation pass;
-#: below, without it. The pass takes most of a kernel's compile time (a first step's compile
-#: drops from about 19 s to 3 s without it) and gives the same bits; below this size the
-#: kernels it makes run no faster, at 1e6 circles they run about 15% faster (the Performance
-#: page gives the measurements).
+#: below, without it. The pass takes most of a kernel's compile time and gives the same bits;
+#: below this size the kernels it makes run no faster, at a million circles they run faster
+#: (the Performance page gives the measurements).
 OPTIMIZE_FROM_N = 100_000
 
 

@@ -3,7 +3,8 @@
 Taichi compiles a scene's kernels on their first use (seconds each) and keeps them in its
 offline cache, so a second run of the same kind of scene starts at once. What decides the
 kernels is the kind of scene (scheme, precision, boundary, equal or mixed radii), where they
-run (arch, threads), and the code (Taichi's version, this package's source). This module
+run (arch, threads), how they compile (with Taichi's CFG pass from `backend.OPTIMIZE_FROM_N`
+circles), and the code (Taichi's version, this package's source). This module
 keeps a list of those kinds beside Taichi's cache; a kind not on it is announced once
 ("compiling kernels for this scene; cached for next time") and put on it. A cache emptied by
 hand, or shared with another machine, can make the list wrong: the message is a courtesy,
@@ -47,8 +48,11 @@ def kind_of(scene, arch, threads):
         taichi = metadata.version("taichi")
     except metadata.PackageNotFoundError:
         taichi = "?"
+    from .backend import OPTIMIZE_FROM_N
+
+    optimized = "optimized" if scene.n >= OPTIMIZE_FROM_N else "quick"  # how a CPU compiles it (backend.compile_for)
     text = (f"{taichi} {_source_fingerprint()} {arch} {threads} {scene.scheme} {scene.precision} "
-            f"{scene.boundary} {'equal' if equal else 'mixed'}")
+            f"{scene.boundary} {'equal' if equal else 'mixed'} {optimized}")
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 

@@ -133,6 +133,10 @@ class FastKernel:
     def _forget(self):
         """Drop the program, compiled kernels and launch contexts of the running runtime."""
         self._program = None
+        self._drop_compiled()
+
+    def _drop_compiled(self):
+        """Drop the compiled kernels and launch contexts (the program stays)."""
         self._compiled = {}
         self._bindings = {}
 
@@ -255,8 +259,7 @@ def _forget_compiled():
     """When `backend.compile_for` changes how kernels compile, every fast kernel drops what it
     compiled and bound (the program stays)."""
     for fast in list(_kernels):
-        fast._compiled = {}
-        fast._bindings = {}
+        fast._drop_compiled()
 
 
 def kernel(fn):

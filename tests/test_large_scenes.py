@@ -113,4 +113,7 @@ def test_the_first_use_of_a_kernel_set_is_announced_once(tmp_path, monkeypatch):
     # Another kind of scene, or other threads, builds other kernels.
     assert kernel_cache.announce(Scene(n=50, box=(4.0, 3.0), radius=(0.05, 0.1)), "cpu", 0, stream=said)
     assert kernel_cache.announce(scene, "cpu", 1, stream=said)
-    assert said.getvalue().count("compiling") == 3
+    # A scene large enough to compile with Taichi's CFG pass (backend.compile_for) builds other kernels.
+    assert kernel_cache.announce(Scene(n=100_000, box=(100.0, 100.0), radius=0.1), "cpu", 0, stream=said)
+    assert not kernel_cache.announce(Scene(n=99_999, box=(100.0, 100.0), radius=0.1), "cpu", 0, stream=said)
+    assert said.getvalue().count("compiling") == 4
