@@ -171,3 +171,87 @@ def test_a_run_takes_no_stats_when_no_writer_needs_them(circles_cpu, monkeypatch
 
     assert Run(sim, 0.5, 4, at_frame=[Plain()]).need_stats
     assert not Run(sim, 0.5, 4, at_frame=[_Frames()], need_stats=False).need_stats
+
+
+def test_two_circles_in_a_periodic_box_have_one_degree_pair_of_heat():
+    # 2(N - 1) = 2 degrees of freedom: kT = (K - |P|^2 / 2M) / 1.
+    assert observables.temperature(3.0, (2.0, 0.0), 4.0, 2, "periodic") == pytest.approx(2.5, rel=1e-15)
+
+
+def test_circles_at_rest_have_no_pressure():
+    still = dict(AFTER, kinetic_energy=0.0, momentum=(0.0, 0.0), temperature=0.0)
+    got = observables.pressures(2.0, 40.0, 60.0, 0.0, N, BOX, "walls", R)
+    assert math.isnan(got["pressure"]) and math.isnan(got["compressibility"])
+    assert got["wall_pressure"] == pytest.approx(60 / (2 * 10), rel=1e-15)  # the walls' impulse alone
+    assert math.isnan(observables.since_start(still, N, BOX, "walls", R)["compressibility"])
+
+
+def test_pressures_since_the_start_of_a_periodic_box_use_the_whole_box():
+    after = with_temperature(AFTER, "periodic")
+    kT = 9.75 / 4
+    got = observables.since_start(after, N, BOX, "periodic", R)
+    assert got["pressure"] == pytest.approx((N * kT + 50 / 6) / 12, rel=1e-15)  # virial 50 over t = 3
+    assert math.isnan(got["wall_pressure"])
+
+
+def test_a_row_carries_the_momentum_at_its_end():
+    row = observables.interval(with_temperature(BEFORE, "walls"), with_temperature(AFTER, "walls"), N, BOX, "walls", R)
+    assert (row["momentum_x"], row["momentum_y"], row["kinetic_energy"]) == (1.0, 2.0, 10.0)
+
+
+class _Clock:
+    """A clock that moves by one second at each reading."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        self.now += 1.0
+        return self.now
+
+
+def _row(k):
+    row = dict.fromkeys(observables.COLUMNS, 0.5 * k)
+    row.update(pair_collisions=3 * k, wall_collisions=k, wall_pressure=math.nan if k % 2 else 1.25)
+    return row
+
+
+def test_a_stats_table_counts_its_rows_and_its_own_time_and_reads_back(tmp_path, monkeypatch):
+    from circles import writers
+
+    clock = _Clock()
+    monkeypatch.setattr(writers.time, "perf_counter", clock)
+    path = tmp_path / "t.csv"
+    with StatsWriter(path) as table:
+        for k in range(3):
+            table.write(_row(k))
+    assert table.rows == 3 and table.seconds == 3.0  # one clock step inside each write
+    back = read_stats(path)
+    assert list(back) == list(observables.COLUMNS)
+    np.testing.assert_array_equal(back["pair_collisions"], [0, 3, 6])
+    np.testing.assert_array_equal(back["wall_pressure"], [1.25, math.nan, 1.25])  # NaN as an empty cell
+
+
+def test_an_empty_last_cell_reads_as_nan(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("time,wall_pressure\n1.0,\n2.0,3.5\n")
+    back = read_stats(path)
+    np.testing.assert_array_equal(back["wall_pressure"], [math.nan, 3.5])
+
+
+def test_a_stats_table_lets_an_error_through(tmp_path):
+    with pytest.raises(KeyError):
+        with StatsWriter(tmp_path / "t.csv") as table:
+            table.write({})  # no columns
+
+
+def test_a_run_counts_the_time_its_stats_take(circles_cpu, monkeypatch):
+    from circles import writers
+
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(3.0, 3.0), radius=0.1, seed=2))
+    run = Run(sim, 0.5, 4, at_interval=[_Frames()])
+    assert run.stats_seconds == 0.0
+    monkeypatch.setattr(writers.time, "perf_counter", _Clock())
+    for _ in run:
+        pass
+    assert run.stats_seconds == 2.0  # two intervals, one clock step around each one's stats
