@@ -23,7 +23,11 @@ Pressure comes two ways:
   wall hits of ``2 m |v_n|`` and L the perimeter open to the centres,
   ``2 (W - 2r) + 2 (H - 2r)``.
 
-Both are exact identities for circles of one radius r; with several radii the walled box's
+The reduced pressure of equal disks of diameter d is ``beta P d^2 = P d^2 / kT`` (from the
+virial pressure), the number the literature on hard disks gives; NaN for circles of several
+radii.
+
+Both pressures are exact identities for circles of one radius r; with several radii the walled box's
 areas use the mean radius, an approximation. Over a time of zero (at t = 0) the pressures
 are not defined and are NaN.
 """
@@ -31,9 +35,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 #: The columns of a stats table (`interval`), in order.
 COLUMNS = ("time", "kinetic_energy", "temperature", "momentum_x", "momentum_y", "pair_collisions",
-           "wall_collisions", "collision_rate", "pressure", "compressibility", "wall_pressure", "max_overlap")
+           "wall_collisions", "collision_rate", "pressure", "compressibility", "reduced_pressure", "wall_pressure",
+           "max_overlap")
 
 
 def centre_box(box, boundary, radius):
@@ -57,11 +64,17 @@ def temperature(kinetic_energy, momentum, total_mass, n, boundary):
     return (kinetic_energy - (px * px + py * py) / (2.0 * total_mass)) / (n - 1)
 
 
-def pressures(duration, virial, wall_impulse, kT, n, box, boundary, radius):
-    """{pressure, compressibility, wall_pressure} over `duration` of simulated time, from the
-    growth of the virial and of the wall impulse over it, at the temperature kT given
-    (`temperature`). wall_pressure is NaN in a periodic box; every value is NaN over a duration
-    of 0."""
+def equal_diameter(radius):
+    """The circles' common diameter, or None when their radii differ."""
+    radius = np.asarray(radius)
+    return float(2.0 * radius[0]) if radius.size and np.all(radius == radius[0]) else None
+
+
+def pressures(duration, virial, wall_impulse, kT, n, box, boundary, radius, diameter=None):
+    """{pressure, compressibility, reduced_pressure, wall_pressure} over `duration` of simulated
+    time, from the growth of the virial and of the wall impulse over it, at the temperature kT
+    given (`temperature`). reduced_pressure needs the `diameter` of equal disks (NaN without);
+    wall_pressure is NaN in a periodic box; every value is NaN over a duration of 0."""
     w, h = centre_box(box, boundary, radius)
     if duration > 0 and kT > 0:
         z = 1.0 + virial / (2.0 * duration * n * kT)
@@ -72,17 +85,18 @@ def pressures(duration, virial, wall_impulse, kT, n, box, boundary, radius):
         wall = math.nan
     else:
         wall = wall_impulse / (duration * 2.0 * (w + h))
-    return {"pressure": p, "compressibility": z, "wall_pressure": wall}
+    reduced = p * diameter * diameter / kT if diameter is not None and math.isfinite(p) else math.nan
+    return {"pressure": p, "compressibility": z, "reduced_pressure": reduced, "wall_pressure": wall}
 
 
-def since_start(stats, n, box, boundary, radius):
+def since_start(stats, n, box, boundary, radius, diameter=None):
     """The pressures averaged from time 0 to `stats["time"]` (see `pressures`), at the
     temperature of `stats`."""
     return pressures(stats["time"], stats["virial"], stats["wall_impulse"], stats["temperature"], n, box,
-                     boundary, radius)
+                     boundary, radius, diameter)
 
 
-def interval(before, after, n, box, boundary, radius):
+def interval(before, after, n, box, boundary, radius, diameter=None):
     """A row of the stats table (`COLUMNS`) for the interval between two `stats()` taken by one
     simulation: the state at its end, the collision counts since the start, and the rates and
     pressures over the interval, at the temperature of its end. collision_rate is the
@@ -100,7 +114,7 @@ def interval(before, after, n, box, boundary, radius):
         "wall_collisions": after["wall_collisions"],
         "collision_rate": 2.0 * pairs / (n * duration) if duration > 0 else math.nan,
         **pressures(duration, after["virial"] - before["virial"], after["wall_impulse"] - before["wall_impulse"],
-                    after["temperature"], n, box, boundary, radius),
+                    after["temperature"], n, box, boundary, radius, diameter),
         "max_overlap": after["max_overlap"],
     }
     return {name: row[name] for name in COLUMNS}

@@ -533,7 +533,8 @@ class Simulation:
         kT: the kinetic energy over N in a walled box, and in a periodic box, which conserves
         its momentum, the kinetic energy in the centre-of-mass frame over N - 1
         (`observables.temperature`); max_overlap, the largest overlap of two circles as a fraction of
-        their contact distance; pressure, compressibility (Z = P A / (N kT)) and wall_pressure,
+        their contact distance; pressure, compressibility (Z = P A / (N kT)), reduced_pressure
+        (beta P d^2 of equal disks of diameter d, NaN for several radii) and wall_pressure,
         averaged since time 0 (NaN at time 0, wall_pressure NaN in a periodic box: see
         `circles.observables`)."""
         self._live()
@@ -552,7 +553,8 @@ class Simulation:
         }
         stats["temperature"] = observables.temperature(stats["kinetic_energy"], stats["momentum"], float(np.sum(m)),
                                                        self.n, self.boundary)
-        stats.update(observables.since_start(stats, self.n, self.box, self.boundary, float(np.mean(self._radius))))
+        stats.update(observables.since_start(stats, self.n, self.box, self.boundary, float(np.mean(self._radius)),
+                                             observables.equal_diameter(self._radius)))
         stats.update(self.stepper.stats())
         return stats
 

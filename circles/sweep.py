@@ -49,8 +49,10 @@ from .command import (EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, SWEEP_TABLE
                       make_folder, sweep_or_scene)
 
 #: The observables a sweep may keep. Each is measured per block; energy_change is the change
-#: of the kinetic energy over a block relative to the energy at the start of the run.
-OBSERVABLES = ("compressibility", "collision_rate", "energy_change", "pressure", "wall_pressure", "temperature")
+#: of the kinetic energy over a block relative to the energy at the start of the run; reduced_pressure
+#: (beta P d^2) needs equal radii; hexatic_order (|psi_6|, `circles.order`) is taken at each block's end.
+OBSERVABLES = ("compressibility", "collision_rate", "energy_change", "pressure", "wall_pressure", "temperature",
+               "reduced_pressure", "hexatic_order")
 DEFAULT_OBSERVABLES = ("compressibility", "collision_rate", "energy_change")
 
 #: The [sweep] table's keys and their defaults.
@@ -254,6 +256,9 @@ def sweep_from_dict(data: dict, source="") -> Sweep:
         if "wall_pressure" in observables and made.boundary == "periodic":
             raise ValueError("[sweep] observables: wall_pressure needs walls, and the point's boundary is "
                              "periodic: drop wall_pressure or use boundary = \"walls\"")
+        if "reduced_pressure" in observables and made.radius[0] != made.radius[1]:
+            raise ValueError("[sweep] observables: reduced_pressure (beta P d^2) needs equal disks, and the point's "
+                             f"radii range from {made.radius[0]:g} to {made.radius[1]:g}: drop it or give one radius")
         steps = (equilibrate + measure) / _step_of(made)
         if steps > 1e10:
             raise ValueError(f"[sweep] equilibrate + measure = {equilibrate + measure:g} s is {steps:.3g} steps of "
@@ -292,12 +297,13 @@ def _ensure_runtime(threads):
     backend.init("cpu", cpu_max_num_threads=max(1, int(threads)))
 
 
-def run_task(scene_fields_, equilibrate, measure, blocks, threads=None):
+def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=()):
     """Run one (point, repeat): equilibrate, then measure every observable over each of
-    `blocks` equal blocks of `measure` simulated seconds. Returns {"blocks": {observable:
-    [values]}, "pair_collisions", "seconds", "pid"}. Tasks in one process take turns (the
-    Taichi runtime is the process's)."""
+    `blocks` equal blocks of `measure` simulated seconds (hexatic_order, at each block's end,
+    only when `kept` names it). Returns {"blocks": {observable: [values]}, "pair_collisions",
+    "seconds", "pid"}. Tasks in one process take turns (the Taichi runtime is the process's)."""
     from .observables import interval
+    from .order import hexatic_order, psi6
     from .scene import Scene
 
     with _runtime_lock:
@@ -318,9 +324,13 @@ def run_task(scene_fields_, equilibrate, measure, blocks, threads=None):
         for k in range(blocks):
             sim.advance(equilibrate + measure * (k + 1) / blocks - sim.time)
             after = sim.stats()
-            row = interval(before, after, scene.n, scene.box, scene.boundary, radius)
-            for name in ("compressibility", "collision_rate", "pressure", "wall_pressure", "temperature"):
+            row = interval(before, after, scene.n, scene.box, scene.boundary, radius,
+                           2.0 * scene.radius[0] if scene.radius[0] == scene.radius[1] else None)
+            for name in ("compressibility", "collision_rate", "pressure", "wall_pressure", "temperature",
+                         "reduced_pressure"):
                 values[name].append(row[name])
+            if "hexatic_order" in kept:  # measured only when asked for: a pass over the neighbours
+                values["hexatic_order"].append(hexatic_order(psi6(sim.state().pos, sim.box, sim.periodic)))
             values["energy_change"].append((after["kinetic_energy"] - before["kinetic_energy"]) / energy_0
                                            if energy_0 > 0 else 0.0)
             before = after
@@ -469,7 +479,7 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
                 on_row(row)
 
     def args(task):
-        return (sweep.point_scene(*task), sweep.equilibrate, sweep.measure, sweep.blocks, threads)
+        return (sweep.point_scene(*task), sweep.equilibrate, sweep.measure, sweep.blocks, threads, sweep.observables)
 
     try:
         if client is None:

@@ -52,6 +52,7 @@ import taichi as ti
 
 from . import observables
 from .command import make_folder
+from .writers import row_of
 
 #: Types are named "A", "B", ... one per distinct radius, up to MOST_TYPES; more radii than that
 #: (a continuous range) get one type for all.
@@ -177,7 +178,7 @@ class GSDWriter:
         if stats is None or row is None:
             stats = sim.stats()
         if row is None:
-            row = observables.interval(stats, stats, sim.n, sim.box, sim.boundary, float(np.mean(sim._radius)))
+            row = row_of(stats, stats, sim)
         n = sim.n
         w, h = sim.box
         held_pos = sim._creation_order(sim.pos.to_numpy())

@@ -28,7 +28,8 @@ def frame_times(duration, fps):
 
 def row_of(before, after, sim):
     """The stats row (`observables.interval`) between two `stats()` of `sim`."""
-    return observables.interval(before, after, sim.n, sim.box, sim.boundary, float(np.mean(sim._radius)))
+    return observables.interval(before, after, sim.n, sim.box, sim.boundary, float(np.mean(sim._radius)),
+                                observables.equal_diameter(sim._radius))
 
 
 def stats_rows(sim, duration, fps):

@@ -255,3 +255,33 @@ def test_a_run_counts_the_time_its_stats_take(circles_cpu, monkeypatch):
     for _ in run:
         pass
     assert run.stats_seconds == 2.0  # two intervals, one clock step around each one's stats
+
+
+def test_the_reduced_pressure_of_equal_disks():
+    walls = observables.interval(with_temperature(BEFORE, "walls"), with_temperature(AFTER, "walls"), N, BOX,
+                                 "walls", R, 1.0)
+    assert walls["reduced_pressure"] == pytest.approx((20 / 6) * 1.0 ** 2 / 2.0, rel=1e-15)  # P d^2 / kT
+    kT = 9.75 / 4
+    periodic = observables.interval(with_temperature(BEFORE, "periodic"), with_temperature(AFTER, "periodic"), N,
+                                    BOX, "periodic", R, 0.5)
+    assert periodic["reduced_pressure"] == pytest.approx((N * kT + 10) / 12 * 0.25 / kT, rel=1e-15)
+    assert math.isnan(observables.interval(with_temperature(BEFORE, "walls"), with_temperature(AFTER, "walls"), N,
+                                           BOX, "walls", R)["reduced_pressure"])  # no common diameter
+    assert observables.equal_diameter([0.5, 0.5]) == 1.0 and observables.equal_diameter([0.5, 0.6]) is None
+
+
+def test_a_simulations_reduced_pressure_is_z_rho_d_squared(circles_cpu):
+    from circles import reference
+
+    eta = 0.5
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=200, area_fraction=eta, radius=0.5, speed=1.0, mass="equal",
+                                                   boundary="periodic", seed=4))
+    sim.advance(5.0)
+    st = sim.stats()
+    w, h = sim.box
+    expect = reference.reduced_pressure(st["compressibility"], 200 * math.pi * 0.25 / (w * h))
+    assert st["reduced_pressure"] == pytest.approx(expect, rel=1e-12)
+    assert abs(200 * math.pi * 0.25 / (w * h) - eta) < 1e-12
+    mixed = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(6.0, 6.0), radius=(0.1, 0.2), seed=4))
+    mixed.advance(1.0)
+    assert math.isnan(mixed.stats()["reduced_pressure"])

@@ -295,3 +295,20 @@ def test_each_repeat_of_a_point_runs_its_own_seed(serial):
     first, second = (sweeps.run_task(sweep.point_scene(0, r), 0.0, 0.5, 1) for r in range(2))
     assert first["pair_collisions"] != second["pair_collisions"] or \
         first["blocks"]["compressibility"] != second["blocks"]["compressibility"]
+
+
+def test_a_sweep_keeps_the_reduced_pressure_and_the_hexatic_order_when_asked(tmp_path):
+    text = TINY.replace('observables = ["compressibility", "collision_rate", "energy_change"]',
+                        'observables = ["compressibility", "reduced_pressure", "hexatic_order"]')
+    sweep = sweeps.read_sweep(write(tmp_path, text.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.5]")))
+    result = sweeps.run_task(sweep.point_scene(0, 0), 0.5, 2.0, 4, kept=sweep.observables)
+    blocks = result["blocks"]
+    # beta P d^2 = 4 eta Z / pi for each block (radius 0.05, area fraction 0.5).
+    for z, reduced in zip(blocks["compressibility"], blocks["reduced_pressure"]):
+        assert reduced == pytest.approx(4 * 0.5 * z / math.pi, rel=1e-9)
+    assert len(blocks["hexatic_order"]) == 4 and all(0 <= q < 0.5 for q in blocks["hexatic_order"])  # a fluid
+    plain = sweeps.run_task(sweep.point_scene(0, 0), 0.5, 2.0, 4)
+    assert plain["blocks"]["hexatic_order"] == []  # not measured unless asked
+    mixed = text.replace("radius = 0.05", "radius = [0.04, 0.05]")
+    with pytest.raises(sweeps.SweepError, match="reduced_pressure .* equal disks"):
+        sweeps.read_sweep(write(tmp_path, mixed, "mixed.toml"))
