@@ -136,6 +136,9 @@ def _build_parser():
     data.add_argument("--stats", metavar="RUN.csv", help="a CSV row of observables per frame interval")
     data.add_argument("--trajectory", metavar="RUN.gsd",
                       help="a GSD frame (HOOMD-blue's schema) at each frame's instant")
+    data.add_argument("--order", action="store_true",
+                      help="also measure the hexatic order: a hexatic_order column in --stats, and each circle's "
+                           "psi_6 in --trajectory (circles.order)")
     data.add_argument("--force", action="store_true", help="overwrite existing --stats and --trajectory files")
     from .plot import add_parser as add_plot_parser
     from .sweep import add_sweep_command
@@ -424,6 +427,12 @@ def _prepare(argv, made):
             path = getattr(args, key)
             options[key] = None if path is None else check_path(path, args.force, suffix, f"--{key}", made)
         options["force"] = args.force
+        options["order"] = args.order
+        if args.order and options["stats"] is None and options["trajectory"] is None:
+            raise UsageError("--order measures the hexatic order into --stats and --trajectory: give one of them")
+        if args.order and scene.n <= 6:
+            raise UsageError(f"--order with {scene.n} circles: the hexatic order of a circle takes its 6 nearest "
+                             "neighbours, so it needs at least 7 circles")
         if str(options["out"]).lower() == "none":
             options["out"] = None
         else:
@@ -546,12 +555,13 @@ def _run(scene, options):
         if options["out"] is not None:
             outputs.append(_Video(options, frames, clock, stop))
         if options["trajectory"] is not None:
-            outputs.append(GSDWriter(options["trajectory"], mode))
-        table = StatsWriter(options["stats"], mode) if options["stats"] is not None else None
+            outputs.append(GSDWriter(options["trajectory"], mode, order=options["order"]))
+        table = StatsWriter(options["stats"], mode, order=options["order"]) if options["stats"] is not None else None
         tick = time.perf_counter()
         measuring = options["trajectory"] is not None or table is not None
         run = Run(sim, options["duration"], options["fps"], at_frame=outputs,
-                  at_interval=[table] if table else [], need_stats=measuring)
+                  at_interval=[table] if table else [], need_stats=measuring,
+                  order=options["order"] and table is not None)
         start_stats = run.before if measuring else sim.stats()
         stats_s = time.perf_counter() - tick
         if table:

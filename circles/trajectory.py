@@ -147,9 +147,13 @@ class GSDWriter:
 
     What does not change over a run (diameters, masses, types, colours) is written in the first
     frame only; gsd.hoomd gives every frame the first frame's value of a chunk it lacks.
+
+    order=True also writes each circle's local hexatic order psi_6 (`circles.order`) as
+    ``log/particles/circles/psi6`` (N, 2) float64, its real and imaginary parts, and the global
+    ``log/circles/hexatic_order``: a pass over the neighbours at each frame, so only when asked.
     """
 
-    def __init__(self, path, mode="w", tracker=None):
+    def __init__(self, path, mode="w", tracker=None, order=False):
         import gsd
         import gsd.fl
 
@@ -159,6 +163,7 @@ class GSDWriter:
         self._file = gsd.fl.open(name=str(self.path), mode=mode, application=f"circles {__version__}",
                                  schema="hoomd", schema_version=[1, 4])
         self.tracker = tracker
+        self.order = bool(order)
         self.frames = self._file.nframes
         self.seconds = 0.0  # spent writing, wall-clock
         self.cpu_seconds = 0.0  # the process's processor time meanwhile
@@ -209,6 +214,12 @@ class GSDWriter:
             chunk("particles/image", image)
         for name in observables.COLUMNS:
             chunk(f"log/circles/{name}", np.array([row[name]], np.float64))
+        if self.order:
+            from .order import hexatic_order, psi6
+
+            local = psi6(held_pos, sim.box, sim.periodic)
+            chunk("log/particles/circles/psi6", np.stack([local.real, local.imag], axis=1))
+            chunk("log/circles/hexatic_order", np.array([hexatic_order(local)], np.float64))
         chunk("log/circles/dt", np.array([sim.dt], np.float64))
         chunk("log/circles/precision_bits", np.array([32 if sim.precision == "f32" else 64], np.uint8))
         chunk("log/circles/boundary", _text(sim.boundary))

@@ -53,21 +53,23 @@ def _cell(value):
 
 
 class StatsWriter:
-    """A stats table as CSV: a header of `observables.COLUMNS`, then one row per `write`,
-    written and flushed whole, so a run stopped at any point leaves whole rows. NaN (the
-    wall pressure in a periodic box, rates over an empty interval) is an empty cell."""
+    """A stats table as CSV: a header of `observables.COLUMNS` (and `hexatic_order` with
+    order=True, which the rows must then hold: `Run(order=True)`), then one row per `write`,
+    written and flushed whole, so a run stopped at any point leaves whole rows. NaN (the wall
+    pressure in a periodic box, rates over an empty interval) is an empty cell."""
 
-    def __init__(self, path, mode="w"):
+    def __init__(self, path, mode="w", order=False):
         self.path = Path(path)
+        self.columns = observables.COLUMNS + (("hexatic_order",) if order else ())
         self._file = open(self.path, mode, encoding="utf-8", newline="")
-        self._file.write(",".join(observables.COLUMNS) + "\n")
+        self._file.write(",".join(self.columns) + "\n")
         self._file.flush()
         self.rows = 0
         self.seconds = 0.0
 
     def write(self, row):
         tick = time.perf_counter()
-        self._file.write(",".join(_cell(row[name]) for name in observables.COLUMNS) + "\n")
+        self._file.write(",".join(_cell(row[name]) for name in self.columns) + "\n")
         self._file.flush()
         self.rows += 1
         self.seconds += time.perf_counter() - tick
@@ -98,9 +100,11 @@ class Run:
     ``write(row)`` at each interval's end. Stats are taken only when a writer needs them.
 
     Use: ``for k in run: ...`` runs interval by interval (frame k's writers, then the advance
-    to the interval's end, then the row), so that a caller can stop between two."""
+    to the interval's end, then the row), so that a caller can stop between two. order=True
+    adds the global hexatic order |psi_6| at each row's end (`circles.order`) as
+    ``hexatic_order``."""
 
-    def __init__(self, sim, duration, fps, at_frame=(), at_interval=(), need_stats=None):
+    def __init__(self, sim, duration, fps, at_frame=(), at_interval=(), need_stats=None, order=False):
         self.sim = sim
         self.times = frame_times(duration, fps)
         self.start = sim.time
@@ -108,9 +112,18 @@ class Run:
         self.at_interval = list(at_interval)
         self.need_stats = bool(self.at_interval) or any(getattr(w, "wants_row", True) for w in self.at_frame) \
             if need_stats is None else need_stats
+        self.order = bool(order)
         self.before = sim.stats() if self.need_stats else None
-        self.row = row_of(self.before, self.before, sim) if self.need_stats else None
+        self.row = self._row(self.before, self.before) if self.need_stats else None
         self.stats_seconds = 0.0
+
+    def _row(self, before, after):
+        row = row_of(before, after, self.sim)
+        if self.order:
+            from .order import hexatic_order, psi6
+
+            row["hexatic_order"] = hexatic_order(psi6(self.sim.state().pos, self.sim.box, self.sim.periodic))
+        return row
 
     @property
     def frames(self):
@@ -131,7 +144,7 @@ class Run:
             return
         tick = time.perf_counter()
         after = self.sim.stats()
-        self.row = row_of(self.before, after, self.sim)
+        self.row = self._row(self.before, after)
         self.before = after
         self.stats_seconds += time.perf_counter() - tick
         for writer in self.at_interval:

@@ -143,3 +143,40 @@ def test_the_command_line_runs_a_crystal_start_in_hexatic_colours(tmp_path):
     # One orientation everywhere: the pixels inside circles share one hue (red at orientation 0).
     lit = inside[inside.max(axis=1) > 200]
     assert len(lit) > 100 and np.all(lit[:, 0] >= lit[:, 1]) and np.all(lit[:, 0] >= lit[:, 2])
+
+
+def test_order_in_the_stats_table_and_the_trajectory_equals_freuds(tmp_path):
+    """`circles run --order`: a hexatic_order column, and each circle's psi_6 in the GSD log,
+    equal (within freud's float32) to freud's on the frame's positions; the column equals the
+    mean of the frame's psi_6 at the same instant."""
+    import gsd.hoomd
+
+    from circles.writers import read_stats
+    from process_util import run_cli
+
+    done = run_cli(["run", "--crystal", "20", "20", "--area-fraction", "0.68", "--radius", "0.5", "--mass", "equal",
+                    "--boundary", "periodic", "--duration", "2", "--fps", "2", "--out", "none", "--order",
+                    "--stats", "run.csv", "--trajectory", "run.gsd", "--arch", "cpu"], tmp_path)
+    assert done.returncode == 0, done.stderr
+    table = read_stats(tmp_path / "run.csv")
+    assert "hexatic_order" in table and np.all((table["hexatic_order"] >= 0) & (table["hexatic_order"] <= 1))
+    with gsd.hoomd.open(str(tmp_path / "run.gsd")) as traj:
+        frames = list(traj)
+    w, h = frames[0].configuration.box[:2]
+    for k, frame in enumerate(frames):
+        local = frame.log["particles/circles/psi6"]
+        pos = frame.log["particles/circles/position"]
+        theirs = freud_psi6(pos, (w, h), True)
+        ulp = float(np.spacing(np.float32(max(w, h) / 2)))
+        np.testing.assert_allclose(local[:, 0] + 1j * local[:, 1], theirs, rtol=0, atol=12 * ulp)
+        assert frame.log["circles/hexatic_order"][0] == pytest.approx(abs(np.mean(local[:, 0] + 1j * local[:, 1])),
+                                                                      rel=1e-12)
+        if k > 0:  # the row of the interval ending at frame k
+            assert table["hexatic_order"][k - 1] == pytest.approx(frame.log["circles/hexatic_order"][0], rel=1e-12)
+
+
+def test_order_needs_somewhere_to_go(capsys):
+    from circles import cli
+
+    assert cli.main(["run", "--n", "20", "--order", "--out", "none"]) == 2
+    assert "--order" in capsys.readouterr().err
