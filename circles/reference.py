@@ -70,3 +70,10 @@ def reduced_pressure(z, eta):
     """beta P d^2 of equal disks from the compressibility factor Z = P A / (N kT) at area
     fraction eta: beta P d^2 = Z rho d^2 = 4 eta Z / pi."""
     return 4.0 * eta * z / math.pi
+
+
+def series(n, aspect):
+    """The published points of N = n disks in a box of this aspect (width over height, to 1e-9),
+    sorted by area fraction: what a run of that N and box shape is compared with."""
+    found = [p for p in pressures(n=n) if math.isclose(p.aspect, aspect, rel_tol=1e-9)]
+    return sorted(found, key=lambda p: (p.eta, p.source, p.method))

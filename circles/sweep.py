@@ -518,7 +518,8 @@ def local_cluster(workers, threads_per_worker=1):
 
 LABELS = {"compressibility": "compressibility Z = PA / NkT", "collision_rate": "collisions per circle per unit time",
           "energy_change": "relative energy change per block", "pressure": "pressure (virial)",
-          "wall_pressure": "pressure on the walls", "temperature": "kT"}
+          "wall_pressure": "pressure on the walls", "temperature": "kT",
+          "reduced_pressure": "reduced pressure beta P d^2", "hexatic_order": "hexatic order |psi_6|"}
 
 
 def load_rows(out, sweep):
@@ -534,7 +535,10 @@ def load_rows(out, sweep):
 
 def theory(sweep, values, row):
     """{observable: value} of hard-disk theory at a point, for points of equal disks in a
-    periodic box with a known area fraction: Liu's Z and Enskog's collision rate. Empty else."""
+    periodic box with a known area fraction: Liu's Z and Enskog's collision rate; and the
+    published reduced pressure (`circles.reference`) where a series of the same N and box shape
+    has this area fraction. Empty else."""
+    from .reference import series
     from .scene import Scene
     from .theory import enskog_rate, liu_z
 
@@ -546,7 +550,12 @@ def theory(sweep, values, row):
     mass = {"equal": 1.0, "radius": r, "area": math.pi * r * r}[scene.mass]
     kT = float(row["temperature"])
     rho = scene.n / (scene.box[0] * scene.box[1])
-    return {"compressibility": liu_z(eta), "collision_rate": enskog_rate(eta, rho, 2 * r, kT, mass)}
+    found = {"compressibility": liu_z(eta), "collision_rate": enskog_rate(eta, rho, 2 * r, kT, mass)}
+    published = [p for p in series(scene.n, scene.box[0] / scene.box[1]) if math.isclose(p.eta, eta, abs_tol=1e-9)]
+    if published:
+        found["reduced_pressure"] = published[0].beta_p_d2
+        found["reduced_pressure_se"] = published[0].se
+    return found
 
 
 def deviations(sweep, rows, name="compressibility"):
@@ -588,7 +597,9 @@ def plot_sweep(sweep, out):
             label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
             ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
             values, row = members[0]
-            if theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
+            if name == "reduced_pressure" and x_key == "area_fraction" and group == groups_first(groups):
+                _plot_published(ax, sweep, values)
+            elif theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
                 # A smooth curve through the points' range, at the first point's temperature.
                 grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]
                 curve = [theory(sweep, {**values, x_key: g}, row)[name] for g in grid]
@@ -606,6 +617,24 @@ def plot_sweep(sweep, out):
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+def groups_first(groups):
+    """The first group's key (the published series is drawn once, with it)."""
+    return next(iter(groups))
+
+
+def _plot_published(ax, sweep, values):
+    """The published reduced pressures of the sweep's N and box shape (`circles.reference`)."""
+    from .reference import series
+    from .scene import Scene
+
+    scene = Scene.from_dict(scene_fields(sweep.scene, values, 0))
+    for (source, method), points in itertools.groupby(series(scene.n, scene.box[0] / scene.box[1]),
+                                                      key=lambda p: (p.source, p.method)):
+        points = list(points)
+        ax.errorbar([p.eta for p in points], [p.beta_p_d2 for p in points], yerr=[p.se for p in points], fmt="-",
+                    color="0.3", lw=1, label=f"{source} ({method}), N = {scene.n}")
 
 
 def _number_of(value):
@@ -705,10 +734,15 @@ def main(argv):
             print(f"plots       {', '.join(paths)}")
         except ImportError:
             print("plots       skipped: matplotlib is not installed (pip install 'circles-sim[plot]')")
-        worst = max(deviations(sweep, load_rows(out, sweep)), key=lambda d: abs(d[3]), default=None)
+        rows = load_rows(out, sweep)
+        worst = max(deviations(sweep, rows), key=lambda d: abs(d[3]), default=None)
         if worst is not None:
             print(f"liu         largest deviation of Z from Liu's: {100 * worst[3]:+.2f}% ({worst[4]:+.1f} standard "
                   f"errors) at area fraction {worst[0]:g}")
+        worst = max(deviations(sweep, rows, "reduced_pressure"), key=lambda d: abs(d[4]), default=None)
+        if worst is not None:
+            print(f"published   largest deviation of beta P d^2 from the published one at this N: {worst[1] - worst[2]:+.4f} "
+                  f"({worst[4]:+.1f} standard errors) at area fraction {worst[0]:g}")
         return 0
     except KeyboardInterrupt:
         print("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun runs the others",

@@ -30,3 +30,18 @@ def test_liu_holds_to_about_a_percent_at_0_67_and_not_beyond():
     point = reference.pressures("Li2022", n=870)[0]
     liu = reference.reduced_pressure(theory.liu_z(point.eta), point.eta)
     assert liu / point.beta_p_d2 - 1 == pytest.approx(0.0146, abs=0.0005)
+
+
+def test_a_sweep_of_the_published_n_and_box_is_set_beside_the_published_pressure(tmp_path):
+    from circles import sweep as sweeps
+
+    path = tmp_path / "melt.toml"
+    path.write_text('[scene]\ncrystal = [29, 30]\nradius = 0.5\nmass = "equal"\nboundary = "periodic"\n\n'
+                    '[vary]\narea_fraction = [0.670, 0.675]\n\n[sweep]\nobservables = ["reduced_pressure"]\n')
+    sweep = sweeps.read_sweep(path)
+    row = {"temperature": "0.5"}
+    known = sweeps.theory(sweep, sweep.points[0], row)
+    assert (known["reduced_pressure"], known["reduced_pressure_se"]) == (7.986735, 0.000026)
+    assert "reduced_pressure" not in sweeps.theory(sweep, sweep.points[1], row)  # no published point at 0.675
+    assert [p.eta for p in reference.series(870, 29 / (30 * math.sqrt(3) / 2))][:2] == [0.670, 0.672]
+    assert reference.series(870, 1.0) == []  # N = 870 was published in the 29 : 30 sqrt(3)/2 box only
