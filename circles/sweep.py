@@ -597,8 +597,9 @@ def plot_sweep(sweep, out):
             label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
             ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
             values, row = members[0]
-            if name == "reduced_pressure" and x_key == "area_fraction" and group == groups_first(groups):
-                _plot_published(ax, sweep, values)
+            if name == "reduced_pressure":  # the published series, once, in place of a curve of theory
+                if x_key == "area_fraction" and group == groups_first(groups):
+                    _plot_published(ax, sweep, values)
             elif theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
                 # A smooth curve through the points' range, at the first point's temperature.
                 grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]

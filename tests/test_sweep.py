@@ -312,3 +312,15 @@ def test_a_sweep_keeps_the_reduced_pressure_and_the_hexatic_order_when_asked(tmp
     mixed = text.replace("radius = 0.05", "radius = [0.04, 0.05]")
     with pytest.raises(sweeps.SweepError, match="reduced_pressure .* equal disks"):
         sweeps.read_sweep(write(tmp_path, mixed, "mixed.toml"))
+
+
+def test_the_reduced_pressures_plot_draws_each_start_beside_the_published_series(tmp_path):
+    """A sweep of two starts (two groups of points) keeping the reduced pressure of Li et al.'s
+    N = 870 box: the plot has a line of points per start and the published series once."""
+    text = ('[scene]\ncrystal = [29, 30]\nradius = 0.5\nmass = "equal"\nboundary = "periodic"\n\n'
+            '[vary]\narea_fraction = [0.670, 0.675]\nstart = ["fluid", "crystal"]\n\n'
+            '[sweep]\nrepeats = 1\nequilibrate = 0.1\nmeasure = 0.2\nblocks = 2\nobservables = ["reduced_pressure"]\n')
+    sweep = sweeps.read_sweep(write(tmp_path, text))
+    sweeps.run_sweep(sweep, tmp_path / "out")
+    (path,) = sweeps.plot_sweep(sweep, tmp_path / "out")
+    assert path.endswith("reduced_pressure.png") and os.path.getsize(path) > 10_000
