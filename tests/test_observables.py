@@ -285,3 +285,30 @@ def test_a_simulations_reduced_pressure_is_z_rho_d_squared(circles_cpu):
     mixed = circles_cpu.Simulation(circles_cpu.Scene(n=50, box=(6.0, 6.0), radius=(0.1, 0.2), seed=4))
     mixed.advance(1.0)
     assert math.isnan(mixed.stats()["reduced_pressure"])
+
+
+def test_a_runs_rows_carry_the_reduced_pressure_and_when_asked_the_hexatic_order(circles_cpu, tmp_path):
+    """Equal disks: each row's beta P d^2 is P d^2 / kT with d their diameter; with order=True
+    the table has a hexatic_order column, |psi_6| of the positions at each row's end."""
+    from circles import order
+
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=60, area_fraction=0.4, radius=0.25, speed=1.0, mass="equal",
+                                                   boundary="periodic", seed=3))
+    ends = []
+
+    class Positions:
+        def write(self, row):
+            ends.append(order.hexatic_order(order.psi6(sim.state().pos, sim.box, True)))
+
+    with StatsWriter(tmp_path / "o.csv", order=True) as table:
+        for _ in Run(sim, 1.0, 4, at_interval=[table, Positions()], order=True):
+            pass
+    rows = read_stats(tmp_path / "o.csv")
+    assert list(rows)[-1] == "hexatic_order"
+    np.testing.assert_allclose(rows["hexatic_order"], ends, rtol=1e-15)
+    np.testing.assert_allclose(rows["reduced_pressure"], rows["pressure"] * 0.5 ** 2 / rows["temperature"],
+                               rtol=1e-12)
+    with StatsWriter(tmp_path / "plain.csv") as table:
+        for _ in Run(sim, 0.5, 4, at_interval=[table]):
+            pass
+    assert "hexatic_order" not in read_stats(tmp_path / "plain.csv")
