@@ -268,6 +268,7 @@ def test_the_reduced_pressure_of_equal_disks():
     assert math.isnan(observables.interval(with_temperature(BEFORE, "walls"), with_temperature(AFTER, "walls"), N,
                                            BOX, "walls", R)["reduced_pressure"])  # no common diameter
     assert observables.equal_diameter([0.5, 0.5]) == 1.0 and observables.equal_diameter([0.5, 0.6]) is None
+    assert observables.equal_diameter([0.5]) == 1.0 and observables.equal_diameter([]) is None  # one circle, none
 
 
 def test_a_simulations_reduced_pressure_is_z_rho_d_squared(circles_cpu):
