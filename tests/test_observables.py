@@ -144,6 +144,7 @@ def test_a_run_gives_each_frame_the_row_of_the_interval_that_ended_then(circles_
         pass
     times = [t for t, _, _ in frames.got]
     assert times == [0.0, 0.25, 0.5, 0.75] and len(rows) == 4
+    assert all("hexatic_order" not in row for row in rows)  # not measured unless asked for
     assert frames.got[0][1]["time"] == 0.0 and math.isnan(frames.got[0][1]["pressure"])
     for k in range(1, 4):
         assert frames.got[k][1] is rows[k - 1]  # frame k: the row of the interval ending at its instant
