@@ -109,6 +109,6 @@ def _checked_table(table, out, made):
         raise UsageError(f"{table}: not a stats table (no column {', '.join(missing)})")
     if len(columns["time"]) == 0:
         raise UsageError(f"{table}: the table has no rows yet")
-    make_folder(out.parent, f"--out {out}" if out.name else str(out), made)
+    make_folder(out.parent, f"--out {out}", made)
     return columns
 

@@ -598,7 +598,7 @@ def plot_sweep(sweep, out):
             ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
             values, row = members[0]
             if name == "reduced_pressure":  # the published series, once, in place of a curve of theory
-                if x_key == "area_fraction" and group == groups_first(groups):
+                if x_key == "area_fraction" and group == next(iter(groups)):
                     _plot_published(ax, sweep, values)
             elif theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
                 # A smooth curve through the points' range, at the first point's temperature.
@@ -618,11 +618,6 @@ def plot_sweep(sweep, out):
         plt.close(fig)
         paths.append(path)
     return paths
-
-
-def groups_first(groups):
-    """The first group's key (the published series is drawn once, with it)."""
-    return next(iter(groups))
 
 
 def _plot_published(ax, sweep, values):
