@@ -140,6 +140,13 @@ def _build_parser():
                       help="also measure the hexatic order: a hexatic_order column in --stats, and each circle's "
                            "psi_6 in --trajectory (circles.order)")
     data.add_argument("--force", action="store_true", help="overwrite existing --stats and --trajectory files")
+    data.add_argument("--checkpoint-every", type=float, metavar="T",
+                      help="keep a full-precision restart point of the run (RUN.checkpoint.gsd beside --trajectory, "
+                           "or else --stats) at the first frame after each T simulated seconds, at a stop and at the "
+                           "end (circles.checkpoint)")
+    data.add_argument("--resume", action="store_true",
+                      help="continue the run whose --stats and --trajectory files these are, from its last frame "
+                           "or checkpoint: the same bits as a run never stopped")
     from .plot import add_parser as add_plot_parser
     from .sweep import add_sweep_command
     add_plot_parser(commands)
@@ -387,6 +394,41 @@ def _circle_list(path, fields, args):
         raise UsageError(f"{path}: {error}") from None
 
 
+def _check_resume_flags(args):
+    """Refuse --resume and --checkpoint-every where they cannot work, before anything else."""
+    if args.checkpoint_every is not None:
+        _positive("--checkpoint-every", args.checkpoint_every)
+    if args.checkpoint_every is not None and args.stats is None and args.trajectory is None:
+        raise UsageError("--checkpoint-every keeps a restart point of a run's --stats and --trajectory files: give "
+                         "one of them")
+    if not args.resume:
+        return
+    if args.force:
+        raise UsageError("--resume continues the files of a run, and --force would overwrite them: give one of "
+                         "the two")
+    if args.stats is None and args.trajectory is None:
+        raise UsageError("--resume continues a run's --stats and --trajectory files: give those the run wrote")
+    if args.out is not None and args.out.lower() != "none":
+        raise UsageError(f"--resume continues --stats and --trajectory, and a video cannot be continued: drop "
+                         f"--out {args.out}, or give --out none")
+
+
+def _checkpoint_path(options, args):
+    """The run's checkpoint (`checkpoint.path_beside` its trajectory, else its stats table), or
+    None for a run without data files. A new run refuses one left by an earlier run unless
+    --force, which has it removed when the run starts."""
+    from . import checkpoint
+
+    data = options["trajectory"] or options["stats"]
+    if data is None:
+        return None
+    path = checkpoint.path_beside(data)
+    if path.exists() and not args.resume and not args.force:
+        raise UsageError(f"{path} exists, a checkpoint of an earlier run: give --resume to continue that run, or "
+                         "--force to start again")
+    return path
+
+
 def _prepare(argv, made):
     """Everything that can fail on bad input, before any simulating: (scene, options).
 
@@ -421,24 +463,45 @@ def _prepare(argv, made):
         raise UsageError(f"{args.scene}: {error}") from None
     if longest is not None:
         check_step_count(options["duration"], longest)
+    _check_resume_flags(args)
     from .trajectory import check_path
     try:
         for key, suffix in (("stats", ".csv"), ("trajectory", ".gsd")):
             path = getattr(args, key)
-            options[key] = None if path is None else check_path(path, args.force, suffix, f"--{key}", made)
+            options[key] = None if path is None else check_path(path, args.force or args.resume, suffix, f"--{key}",
+                                                                made)
+            if args.resume and path is not None and not options[key].is_file():
+                raise UsageError(f"--resume: --{key} {path} does not exist, so there is no run to continue: drop "
+                                 "--resume to start the run")
         options["force"] = args.force
+        options["resume"] = args.resume
+        options["checkpoint_every"] = args.checkpoint_every
+        options["checkpoint"] = _checkpoint_path(options, args)
         options["order"] = args.order
         if args.order and options["stats"] is None and options["trajectory"] is None:
             raise UsageError("--order measures the hexatic order into --stats and --trajectory: give one of them")
         if args.order and scene.n <= 6:
             raise UsageError(f"--order with {scene.n} circles: the hexatic order of a circle takes its 6 nearest "
                              "neighbours, so it needs at least 7 circles")
+        if args.resume and args.out is None and str(options["out"]).lower() != "none":
+            # The video of a scene file's [run] table, or the default one: a resumed run writes none.
+            options["out"] = "none"
+            options["video_left"] = True
         if str(options["out"]).lower() == "none":
             options["out"] = None
         else:
             options["out"] = check_writable(options["out"], options["fps"], options["size"], made)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    from . import resume
+    from .writers import frame_times
+
+    options["identity"] = resume.identity(scene, options["fps"], options["order"])
+    options["restart"] = None
+    if args.resume:
+        options["restart"] = resume.restart_point(options["trajectory"], options["checkpoint"], options["identity"])
+        if options["restart"] is not None:
+            resume.check_schedule(options["restart"], frame_times(options["duration"], options["fps"]), options["fps"])
     return scene, options
 
 
@@ -534,49 +597,74 @@ def _run(scene, options):
     from .writers import Run, StatsWriter
 
     started = time.perf_counter()
+    frames = frame_count(options["duration"], options["fps"])
+    identity = options["identity"]
+    point = options.get("restart")
     try:
         threads = options["threads"]
         arch = circles.init(options["arch"], **({"cpu_max_num_threads": threads} if threads else {}))
         # Placement can still refuse a scene that passed the checks of Scene, and
         # from_arrays checks what a CircleList leaves to it (such as the area fraction).
-        sim = _simulation(scene)
+        sim = _simulation(scene) if point is None else point.simulation()
         check_step_count(options["duration"], sim.dt)
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
+    if options.get("video_left"):
+        print("circles: --resume continues the data files; the run's video is not continued (--out none)",
+              file=sys.stderr)
+    first = point.frame if point is not None else 0
+    if point is not None:
+        print(f"circles: continuing from frame {first} (t = {sim.time:.6g} s) of {point.source}", file=sys.stderr)
+    run_start = point.start if point is not None else sim.time
     setup_s = time.perf_counter() - started
-    frames = frame_count(options["duration"], options["fps"])
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
     speeds = Speeds(sim.n)
     stop = _StopRequest()
     previous_handler = signal.signal(signal.SIGINT, stop)
     outputs = []  # what the run writes, each closed at the end
     try:
-        mode = "w" if options.get("force") else "x"
+        # A resumed run stopped before its first frame starts again: its files are written anew.
+        mode = "w" if options.get("force") or options.get("resume") else "x"
+        if point is not None:
+            mode = "a"
+        elif options["checkpoint"] is not None and options.get("force"):
+            options["checkpoint"].unlink(missing_ok=True)  # an earlier run's
         if options["out"] is not None:
             outputs.append(_Video(options, frames, clock, stop))
         if options["trajectory"] is not None:
-            outputs.append(GSDWriter(options["trajectory"], mode, order=options["order"]))
-        table = StatsWriter(options["stats"], mode, order=options["order"]) if options["stats"] is not None else None
+            tracker = getattr(sim, "image_tracker", None) if point is not None else None
+            outputs.append(GSDWriter(options["trajectory"], mode, tracker=tracker, order=options["order"],
+                                     run={"run": identity, "start": run_start}))
+        table = None
+        if options["stats"] is not None:
+            table = StatsWriter(options["stats"], "w" if mode == "a" else mode, order=options["order"],
+                                keep=first if point is not None else None)
         tick = time.perf_counter()
         measuring = options["trajectory"] is not None or table is not None
         run = Run(sim, options["duration"], options["fps"], at_frame=outputs,
                   at_interval=[table] if table else [], need_stats=measuring,
-                  order=options["order"] and table is not None)
+                  order=options["order"] and table is not None, start=run_start,
+                  row=point.row if point is not None and point.refire else None)
+        saver = _Checkpoints(options, run, identity, run_start, outputs)
         start_stats = run.before if measuring else sim.stats()
         stats_s = time.perf_counter() - tick
         if table:
             outputs.append(table)
-        bar = tqdm(total=frames, unit="frame", file=sys.stderr, disable=None,
+        bar = tqdm(total=frames, initial=first, unit="frame", file=sys.stderr, disable=None,
                    dynamic_ncols=True, desc="circles")
-        completed = False  # the whole duration simulated, every frame written
+        completed = first == frames  # the whole duration simulated, every frame written
         failure = None
-        written = 0  # frame instants whose writers all ran
+        at_instant = None  # the frame instant the state is at, between two intervals
         try:
-            for k in range(frames):
-                run.fire_frame()  # a frame is drawn interruptibly, written whole
-                written += 1
+            for k in range(first, frames):
+                at_instant = k
+                if k > first or point is None or point.refire:
+                    if k > first:
+                        saver.maybe(k)
+                    run.fire_frame()  # a frame is drawn interruptibly, written whole
                 if stop.requested:
                     break
+                at_instant = None
                 tick = time.perf_counter()
                 steps_before = sim.steps
                 with stop.interruptible():
@@ -585,6 +673,7 @@ def _run(scene, options):
                 clock["simulate"] += seconds
                 speeds.add(sim.steps - steps_before, seconds)
                 run.fire_interval()  # not interruptible: a row is written whole
+                at_instant = k + 1
                 completed = k + 1 == frames
                 bar.update(1)
                 rate = speeds.recent()
@@ -597,6 +686,8 @@ def _run(scene, options):
         except Exception as error:  # raised once the files are finished
             failure = error
         stop.finishing(", ".join(str(output.path) for output in outputs) or "the run")
+        if failure is None and at_instant is not None:
+            saver.at_stop(at_instant)  # where a stop or the end leaves the run
         bar.close()
         for output in outputs:
             try:
@@ -612,10 +703,47 @@ def _run(scene, options):
         stats_s += time.perf_counter() - tick + run.stats_seconds
         wall_s = time.perf_counter() - started
         _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, stats_s, wall_s,
-                 not completed)
+                 not completed, saver)
     finally:
         signal.signal(signal.SIGINT, previous_handler)
     return 0 if completed else EXIT_INTERRUPTED
+
+
+class _Checkpoints:
+    """A run's restart points (`circles.checkpoint`) with --checkpoint-every T: at the first
+    frame instant T or more after the last one, before that frame's writers; at a stop between
+    two intervals; at the end."""
+
+    def __init__(self, options, run, identity, start, outputs):
+        from .trajectory import GSDWriter
+
+        self.path = options["checkpoint"]
+        self.every = options["checkpoint_every"]
+        self.run, self.sim, self.identity, self.start = run, run.sim, identity, start
+        self.last = self.sim.time
+        writers = [output for output in outputs if isinstance(output, GSDWriter)]
+        self.writer = writers[0] if writers else None
+        self.seconds = 0.0
+
+    def maybe(self, frame):
+        if self.every is not None and self.sim.time - self.last >= self.every:
+            self.write(frame)
+
+    def at_stop(self, frame):
+        if self.every is not None and self.sim.time != self.last:
+            self.write(frame)
+
+    def write(self, frame):
+        from . import checkpoint
+
+        tick = time.perf_counter()
+        # With a trajectory its image flags go along, for the frame a restart writes first.
+        tracker = self.writer.tracker if self.writer is not None else None
+        # The row of the interval that ended here, which this frame's writers get first.
+        progress = {"run": self.identity, "frame": frame, "start": self.start, "row": self.run.row}
+        checkpoint.write(self.path, self.sim, progress, tracker=tracker or None)
+        self.last = self.sim.time
+        self.seconds += time.perf_counter() - tick
 
 
 #: Frames of a run, at least, whose median speed the summary reports (`Speeds.summary`).
@@ -659,7 +787,7 @@ class Speeds:
 
 
 def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, stats_s, wall_s,
-             interrupted):
+             interrupted, saver=None):
     from .trajectory import GSDWriter
     from .video import frames_text
     from .writers import StatsWriter
@@ -679,7 +807,8 @@ def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, sta
                       f"{clock['simulate']:.1f}, drawing {clock['render']:.1f}, "
                       f"writing {clock['write']:.1f}, statistics {stats_s:.1f}"
                       + "".join(f", {_written_text(output)} {output.seconds:.1f}" for output in outputs
-                                if not isinstance(output, _Video))),
+                                if not isinstance(output, _Video))
+                      + (f", checkpoints {saver.seconds:.1f}" if saver is not None and saver.every else "")),
         ("throughput", f"{rate:.3g} circle-steps/s ({covers})"),
         ("collisions", f"{stats['pair_collisions']} pair, {stats['wall_collisions']} wall"),
         ("energy", f"relative change {energy_change:.2e}"),
@@ -697,6 +826,8 @@ def _summary(sim, arch, start_stats, stats, outputs, clock, speeds, setup_s, sta
                                    f"{each})"))
         elif isinstance(output, StatsWriter):
             lines.append(("wrote", f"{output.path} ({output.rows} row{'s' if output.rows != 1 else ''})"))
+    if saver is not None and saver.every is not None and saver.path.exists():
+        lines.append(("checkpoint", f"{saver.path} (continue with --resume)"))
     if not outputs:
         lines.append(("wrote", "nothing (--out none)"))
     paths = " and ".join(str(output.path) for output in outputs)

@@ -19,21 +19,26 @@ particles/image                 i32 (N,3)  periodic box: wraps across each side 
 particles/diameter, mass        f32 (N,)   2 r, m
 particles/typeid, types         u32, str   one type per distinct radius ("A", "B", ...)
 log/circles/<column>            f64 (1,)   the stats row (`observables.COLUMNS`) of the frame
+log/circles/box                 f64 (2,)   [W, H] in full precision
 log/circles/dt, precision_bits  f64, u8    the step length; 32 or 64
 log/circles/boundary, scheme    u8 text    "walls" or "periodic"; "event" or "discrete"
 log/particles/circles/position  f32 / f64  (N, 2) as the simulation holds them, x in [0, W]
 log/particles/circles/velocity  f32 / f64  (N, 2) as held
 log/circles/totals              f64 (4,)   pair and wall collisions, virial, wall impulse
+log/particles/circles/<sum>     i32 / f64  (N,) each circle's share of the totals: pair_count,
+                                           virial and, with walls, wall_count, wall_impulse
 log/particles/circles/radius    f64 (N,)   (first frame only: the same in every frame)
 log/particles/circles/mass      f64 (N,)   (first frame only)
 log/particles/circles/color     u8 (N,3)   (first frame only)
+log/circles/run                 u8 text    what made the run, as JSON (first frame only; the
+                                           command line's, checked by ``circles run --resume``)
 ==============================  =========  ===================================================
 
 HOOMD's schema stores positions in float32; the `log/particles/circles/` chunks keep them in
 the working precision (float64 for an f64 scene), so that `read_simulation` restarts a run
-bit for bit: the same positions, velocities, radii, masses, time, step and dt. Its stats
-totals go on from the frame's (the per-circle sums are not stored, so later sums may differ
-in their last bits).
+bit for bit: the same positions, velocities, radii, masses, time, step and dt, and the
+per-circle sums that the stats totals add up, so that the totals go on as they would have.
+Every frame is so a restart point (`circles.checkpoint`).
 
 Image flags. In a periodic box a circle that leaves through one side comes back through the
 other, and the image flag counts those crossings: the unwrapped position is
@@ -45,6 +50,7 @@ the simulation's reordering of its arrays does not matter, and it only reads the
 so a run with a trajectory is the same, bit for bit, as one without.
 """
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -132,7 +138,8 @@ def check_path(path, force=False, suffix=".gsd", what="--trajectory", made=None)
         raise ValueError(f"{what} {path} is a folder: give a file's path, such as {path / ('run' + suffix)}")
     make_folder(path.parent, f"{what} {path}", made)
     if path.exists() and not force:
-        raise ValueError(f"{what} {path} exists: give --force to overwrite it, or another name")
+        raise ValueError(f"{what} {path} exists: give --force to overwrite it, --resume to continue its run, or another "
+                         "name")
     return path
 
 
@@ -141,8 +148,9 @@ class GSDWriter:
 
     mode: "w" (a new file, overwriting), "x" (a new file; fails if it exists) or "a" (append to
     a file that a GSDWriter wrote, of the same circles). In a periodic box the image flags come
-    from an `ImageTracker` attached to the simulation at the first `write` (or given as
-    `tracker`): frames are then written as the run goes, so that it sees every step. Each frame
+    from an `ImageTracker` attached to the simulation at the first `write` and detached by
+    `close` (or given as `tracker`, which stays attached): frames are then written as the run
+    goes, so that it sees every step. Each frame
     is flushed to the file when written, so a run stopped at any point leaves whole frames.
 
     What does not change over a run (diameters, masses, types, colours) is written in the first
@@ -151,9 +159,13 @@ class GSDWriter:
     order=True also writes each circle's local hexatic order psi_6 (`circles.order`) as
     ``log/particles/circles/psi6`` (N, 2) float64, its real and imaginary parts, and the global
     ``log/circles/hexatic_order``: a pass over the neighbours at each frame, so only when asked.
+
+    run: what made the run (a dict that JSON writes), kept in the first frame as
+    ``log/circles/run``; `run_of` reads it back. tracker=False writes no image flags (a
+    restart point that no trajectory continues: `circles.checkpoint`).
     """
 
-    def __init__(self, path, mode="w", tracker=None, order=False):
+    def __init__(self, path, mode="w", tracker=None, order=False, run=None):
         import gsd
         import gsd.fl
 
@@ -164,6 +176,8 @@ class GSDWriter:
                                  schema="hoomd", schema_version=[1, 4])
         self.tracker = tracker
         self.order = bool(order)
+        self.run = run
+        self._own_tracker = False  # a tracker this writer attached, detached again by close
         self.frames = self._file.nframes
         self.seconds = 0.0  # spent writing, wall-clock
         self.cpu_seconds = 0.0  # the process's processor time meanwhile
@@ -180,14 +194,14 @@ class GSDWriter:
                 raise ValueError("a periodic run's trajectory must start before its first step, so that every "
                                  "wrap is counted: make the GSDWriter (or an ImageTracker) at the start")
             self.tracker = ImageTracker(sim)
+            self._own_tracker = True
         if stats is None or row is None:
             stats = sim.stats()
         if row is None:
             row = row_of(stats, stats, sim)
         n = sim.n
         w, h = sim.box
-        held_pos = sim._creation_order(sim.pos.to_numpy())
-        held_vel = sim._creation_order(sim.vel.to_numpy())
+        held_pos, held_vel, pair_count, wall_count, virial, wall_impulse = sim._download()
         chunk = self._file.write_chunk
         chunk("configuration/step", np.array([sim.steps], np.uint64))
         if self.frames == 0:
@@ -203,12 +217,14 @@ class GSDWriter:
             chunk("log/particles/circles/radius", sim._radius)
             chunk("log/particles/circles/mass", sim._mass)
             chunk("log/particles/circles/color", np.ascontiguousarray(sim._color))
+            if self.run is not None:
+                chunk("log/circles/run", _text(json.dumps(self.run, sort_keys=True)))
         vec = np.zeros((n, 3), np.float32)
         np.subtract(held_pos, (0.5 * w, 0.5 * h), out=vec[:, :2], casting="unsafe")
         chunk("particles/position", vec)
         vec[:, :2] = held_vel
         chunk("particles/velocity", vec)
-        if self.tracker is not None:
+        if self.tracker:
             image = np.zeros((n, 3), np.int32)
             image[:, :2] = self.tracker.images()
             chunk("particles/image", image)
@@ -220,6 +236,7 @@ class GSDWriter:
             local = psi6(held_pos, sim.box, sim.periodic)
             chunk("log/particles/circles/psi6", np.stack([local.real, local.imag], axis=1))
             chunk("log/circles/hexatic_order", np.array([hexatic_order(local)], np.float64))
+        chunk("log/circles/box", np.array([w, h], np.float64))  # configuration/box is float32
         chunk("log/circles/dt", np.array([sim.dt], np.float64))
         chunk("log/circles/precision_bits", np.array([32 if sim.precision == "f32" else 64], np.uint8))
         chunk("log/circles/boundary", _text(sim.boundary))
@@ -228,6 +245,12 @@ class GSDWriter:
                                               stats["wall_impulse"]], np.float64))
         chunk("log/particles/circles/position", np.ascontiguousarray(held_pos))
         chunk("log/particles/circles/velocity", np.ascontiguousarray(held_vel))
+        # Each circle's share of the totals, so that a restart adds up the same sums.
+        chunk("log/particles/circles/pair_count", np.ascontiguousarray(pair_count, np.int32))
+        chunk("log/particles/circles/virial", np.ascontiguousarray(virial, np.float64))
+        if not sim.periodic:
+            chunk("log/particles/circles/wall_count", np.ascontiguousarray(wall_count, np.int32))
+            chunk("log/particles/circles/wall_impulse", np.ascontiguousarray(wall_impulse, np.float64))
         self._file.end_frame()
         self._file.flush()
         self.frames += 1
@@ -235,7 +258,7 @@ class GSDWriter:
         self.cpu_seconds += clock.process_time() - cpu
 
     def close(self):
-        if self.tracker is not None:
+        if self._own_tracker:
             self.tracker.detach()
         self._file.close()
 
@@ -271,7 +294,7 @@ def read_simulation(path, frame=-1, *, track_images=True):
         radius = np.asarray(first.log["particles/circles/radius"], np.float64)
         mass = np.asarray(first.log["particles/circles/mass"], np.float64)
         color = np.asarray(first.log["particles/circles/color"], np.uint8)
-        box = tuple(float(x) for x in snap.configuration.box[:2])
+        box = tuple(float(x) for x in (log["circles/box"] if "circles/box" in log else snap.configuration.box[:2]))
         text = {name: bytes(np.asarray(log[f"circles/{name}"], np.uint8)).decode() for name in ("boundary", "scheme")}
         precision = "f32" if int(log["circles/precision_bits"][0]) == 32 else "f64"
         totals = np.asarray(log["circles/totals"], np.float64)
@@ -280,11 +303,18 @@ def read_simulation(path, frame=-1, *, track_images=True):
                       dt=float(log["circles/dt"][0]), time=float(log["circles/time"][0]),
                       steps=int(snap.configuration.step))
         n = len(radius)
+        shares = {name: log.get(f"particles/circles/{name}") for name in ("pair_count", "wall_count", "virial",
+                                                                           "wall_impulse")}
         for name, total, dtype in (("pair_count", totals[0], np.int32), ("wall_count", totals[1], np.int32),
                                    ("virial", totals[2], np.float64), ("wall_impulse", totals[3], np.float64)):
-            # The totals sit on circle 0 (and any beyond int32's range spread over circles).
+            # Each circle's share where the frame has them (a periodic box has no wall shares: 0);
+            # else the totals sit on circle 0 (and any beyond int32's range spread over circles).
             values = np.zeros(n, dtype)
-            if dtype is np.int32:
+            if shares[name] is not None:
+                values[:] = shares[name]
+            elif shares["pair_count"] is not None:
+                pass
+            elif dtype is np.int32:
                 whole = int(total)
                 most = np.iinfo(np.int32).max
                 k = 0
@@ -299,6 +329,17 @@ def read_simulation(path, frame=-1, *, track_images=True):
     sim = Simulation._from_fields(fields)
     sim.image_tracker = ImageTracker(sim, image) if image is not None and track_images else None
     return sim
+
+
+def run_of(path):
+    """What made the run of a GSD file that `GSDWriter` wrote with ``run=``: the dict of its
+    first frame's ``log/circles/run``, or None (no such chunk, or no frame)."""
+    import gsd.fl
+
+    with gsd.fl.open(name=str(path), mode="r") as file:
+        if file.nframes == 0 or not file.chunk_exists(0, "log/circles/run"):
+            return None
+        return json.loads(bytes(file.read_chunk(0, "log/circles/run")).decode())
 
 
 def unwrapped(frame):

@@ -56,16 +56,40 @@ class StatsWriter:
     """A stats table as CSV: a header of `observables.COLUMNS` (and `hexatic_order` with
     order=True, which the rows must then hold: `Run(order=True)`), then one row per `write`,
     written and flushed whole, so a run stopped at any point leaves whole rows. NaN (the wall
-    pressure in a periodic box, rates over an empty interval) is an empty cell."""
+    pressure in a periodic box, rates over an empty interval) is an empty cell. keep=K goes on
+    with a table that an earlier run wrote, after its first K rows (`circles run --resume`)."""
 
-    def __init__(self, path, mode="w", order=False):
+    def __init__(self, path, mode="w", order=False, keep=None):
         self.path = Path(path)
         self.columns = observables.COLUMNS + (("hexatic_order",) if order else ())
+        self.rows = 0
+        self.seconds = 0.0
+        if keep is not None:
+            self._file = self._continue(int(keep))
+            return
         self._file = open(self.path, mode, encoding="utf-8", newline="")
         self._file.write(",".join(self.columns) + "\n")
         self._file.flush()
-        self.rows = 0
-        self.seconds = 0.0
+
+    def _continue(self, keep):
+        """Open a table this writer wrote to go on after its first `keep` rows: what follows
+        them (rows of a run that went further, a row cut short by a stop) is cut off."""
+        header = ",".join(self.columns)
+        with open(self.path, "rb") as file:
+            lines = file.read().split(b"\n")
+        whole = lines[:-1]  # the last piece has no newline: empty, or a row cut short
+        if not whole or whole[0].decode(errors="replace") != header:
+            held = whole[0].decode(errors="replace")[:80] if whole else "nothing"
+            raise ValueError(f"{self.path} is not the stats table of this run: its header is {held!r}, not that of "
+                             f"{'--order ' if 'hexatic_order' in self.columns else ''}--stats")
+        if len(whole) - 1 < keep:
+            raise ValueError(f"{self.path} holds {len(whole) - 1} rows, fewer than the {keep} the run had written "
+                             "by its restart point: it is not this run's table")
+        file = open(self.path, "r+", encoding="utf-8", newline="")
+        file.truncate(sum(len(line) + 1 for line in whole[:keep + 1]))
+        file.seek(0, 2)
+        self.rows = keep
+        return file
 
     def write(self, row):
         tick = time.perf_counter()
@@ -102,19 +126,22 @@ class Run:
     Use: ``for k in run: ...`` runs interval by interval (frame k's writers, then the advance
     to the interval's end, then the row), so that a caller can stop between two. order=True
     adds the global hexatic order |psi_6| at each row's end (`circles.order`) as
-    ``hexatic_order``."""
+    ``hexatic_order``. start: the simulated time of frame 0 (the simulation's time now by
+    default; a run continued from frame k passes its first start, and goes on with k), and
+    `row` the row of the interval that ended now, which frame writers get first."""
 
-    def __init__(self, sim, duration, fps, at_frame=(), at_interval=(), need_stats=None, order=False):
+    def __init__(self, sim, duration, fps, at_frame=(), at_interval=(), need_stats=None, order=False, start=None,
+                 row=None):
         self.sim = sim
         self.times = frame_times(duration, fps)
-        self.start = sim.time
+        self.start = sim.time if start is None else float(start)
         self.at_frame = list(at_frame)
         self.at_interval = list(at_interval)
         self.need_stats = bool(self.at_interval) or any(getattr(w, "wants_row", True) for w in self.at_frame) \
             if need_stats is None else need_stats
         self.order = bool(order)
         self.before = sim.stats() if self.need_stats else None
-        self.row = self._row(self.before, self.before) if self.need_stats else None
+        self.row = None if not self.need_stats else row if row is not None else self._row(self.before, self.before)
         self.stats_seconds = 0.0
 
     def _row(self, before, after):

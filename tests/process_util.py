@@ -48,10 +48,10 @@ def run_cli(args, cwd, *, python=("-m", "circles.cli"), extra_env=None, timeout=
                           text=True, timeout=timeout, **options)
 
 
-def stop_with_ctrl_c(args, cwd, ready, wait=90, poll=0.1):
-    """Start the command line with `args` in `cwd` and send it SIGINT (Ctrl-C) as soon as
-    `ready()` holds; fails if it ends first or is not ready within `wait` seconds. Returns
-    (returncode, stdout, stderr)."""
+def stop_with_ctrl_c(args, cwd, ready, wait=90, poll=0.1, sig=signal.SIGINT):
+    """Start the command line with `args` in `cwd` and send it SIGINT (Ctrl-C), or `sig`, as
+    soon as `ready()` holds; fails if it ends first or is not ready within `wait` seconds.
+    Returns (returncode, stdout, stderr)."""
     process = subprocess.Popen([sys.executable, "-m", "circles.cli", *args], cwd=cwd, env=child_env(),
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -60,7 +60,7 @@ def stop_with_ctrl_c(args, cwd, ready, wait=90, poll=0.1):
             assert process.poll() is None, process.communicate()
             assert time.monotonic() < deadline
             time.sleep(poll)
-        process.send_signal(signal.SIGINT)
+        process.send_signal(sig)
         stdout, stderr = process.communicate(timeout=60)
     finally:
         process.kill()
