@@ -12,7 +12,6 @@ import signal
 import gsd.fl
 import numpy as np
 import pytest
-
 from process_util import run_cli, stop_with_ctrl_c
 
 
@@ -64,7 +63,7 @@ def straight_and_resumed(tmp_path, flags, data, stop_at, sig=signal.SIGKILL):
 
 
 def assert_same_checkpoints(a, b):
-    import circles.checkpoint as checkpoint
+    from circles import checkpoint
 
     x, px = checkpoint.read(a)
     y, py = checkpoint.read(b)
