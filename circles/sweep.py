@@ -38,6 +38,7 @@ import itertools
 import json
 import math
 import os
+import shutil
 import sys
 import threading
 import time
@@ -69,6 +70,8 @@ TABLES = SWEEP_TABLES
 #: belongs to (a rerun with another base scene or [sweep] table is refused).
 RESULTS = "results.csv"
 IDENTITY = "sweep.json"
+#: The folder of the tasks' checkpoints, in the output folder, with [sweep] checkpoint_every.
+CHECKPOINTS = "checkpoints"
 
 
 class SweepError(ValueError):
@@ -92,6 +95,7 @@ class Sweep:
     observables: tuple
     points: list = field(default_factory=list)
     source: str = ""
+    checkpoint_every: float | None = None
 
     @property
     def varied(self):
@@ -104,9 +108,12 @@ class Sweep:
     def identity(self) -> dict:
         """What fixes the meaning of a row: the base scene, the names of the varied fields and
         the measurement (not the values varied: a sweep may be extended)."""
-        return {"scene": self.scene, "varied": list(self.varied), "repeats": self.repeats,
-                "equilibrate": self.equilibrate, "measure": self.measure, "blocks": self.blocks,
-                "observables": list(self.observables)}
+        identity = {"scene": self.scene, "varied": list(self.varied), "repeats": self.repeats,
+                    "equilibrate": self.equilibrate, "measure": self.measure, "blocks": self.blocks,
+                    "observables": list(self.observables)}
+        if self.checkpoint_every is not None:  # it cuts the equilibration into pieces: other bits
+            identity["checkpoint_every"] = self.checkpoint_every
+        return identity
 
 
 def repeat_seed(base_seed, repeat):
@@ -220,9 +227,13 @@ def sweep_from_dict(data: dict, source="") -> Sweep:
             raise ValueError(f"[vary] {key} lists {twice!r} twice: give each value once")
     if "box" in vary and "area_fraction" in vary:
         raise ValueError("[vary] box and area_fraction are both varied: vary one of them")
-    unknown = sorted(set(settings) - set(SWEEP_DEFAULTS))
+    unknown = sorted(set(settings) - set(SWEEP_DEFAULTS) - {"checkpoint_every"})
     if unknown:
-        raise ValueError(f"[sweep] unknown key(s) {', '.join(unknown)}: known keys are {', '.join(SWEEP_DEFAULTS)}")
+        raise ValueError(f"[sweep] unknown key(s) {', '.join(unknown)}: known keys are {', '.join(SWEEP_DEFAULTS)}, "
+                         "checkpoint_every")
+    every = settings.get("checkpoint_every")
+    if every is not None:
+        every = _duration("checkpoint_every", every, True)
     s = {**SWEEP_DEFAULTS, **settings}
     repeats = _whole("repeats", s["repeats"], 1, MOST_REPEATS)
     blocks = _whole("blocks", s["blocks"], 1, MOST_BLOCKS)
@@ -243,7 +254,8 @@ def sweep_from_dict(data: dict, source="") -> Sweep:
                          f"tasks, more than {MOST_TASKS}: split the sweep")
     points = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
     sweep = Sweep(scene=scene, vary=dict(vary), repeats=repeats, equilibrate=equilibrate, measure=measure,
-                  blocks=blocks, observables=tuple(observables), points=points, source=source)
+                  blocks=blocks, observables=tuple(observables), points=points, source=source,
+                  checkpoint_every=every)
     base_seed = scene.get("seed", 0)
     from .scene import check_count
     check_count("[scene] seed", base_seed)
@@ -297,45 +309,111 @@ def _ensure_runtime(threads):
     backend.init("cpu", cpu_max_num_threads=max(1, int(threads)))
 
 
-def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=()):
+def pieces(equilibrate, measure, blocks, every=None):
+    """The simulated times a task advances to, in order, each with the block it ends (None for
+    the equilibration). With `every`, the equilibration goes in pieces of that length, so that
+    a checkpoint can fall within it; the pieces depend on nothing else, so a task resumed from
+    a checkpoint takes the steps of one never stopped."""
+    ends = []
+    if every is not None:
+        j = 1
+        while j * every < equilibrate:
+            ends.append((j * every, None))
+            j += 1
+    if equilibrate > 0:
+        ends.append((equilibrate, None))
+    return ends + [(equilibrate + measure * (k + 1) / blocks, k) for k in range(blocks)]
+
+
+def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=(), checkpoint=None, every=None):
     """Run one (point, repeat): equilibrate, then measure every observable over each of
     `blocks` equal blocks of `measure` simulated seconds (hexatic_order, at each block's end,
     only when `kept` names it). Returns {"blocks": {observable: [values]}, "pair_collisions",
-    "seconds", "pid"}. Tasks in one process take turns (the Taichi runtime is the process's)."""
+    "seconds", "pid", "resumed_at"}. Tasks in one process take turns (the Taichi runtime is
+    the process's).
+
+    With `checkpoint` (a path) and `every` (simulated seconds), the task keeps a restart point
+    there (`circles.checkpoint`) at the end of the first piece (`pieces`) `every` or more after
+    the last, and goes on from one it finds of the same task: a task run again after its
+    worker died does only the rest, with the same result. ``resumed_at`` is the simulated time
+    it went on from (0.0 from the start); the file is removed when the task ends."""
+    from . import checkpoint as restart
     from .observables import interval
     from .order import hexatic_order, psi6
     from .scene import Scene
+    from .trajectory import read_simulation, run_of
 
+    task = {"scene": scene_fields_, "equilibrate": equilibrate, "measure": measure, "blocks": blocks,
+            "every": every, "kept": list(kept)}
+    task = json.loads(json.dumps(task))
     with _runtime_lock:
         _ensure_runtime(threads)
         from .simulation import Simulation
 
         started = time.perf_counter()
         scene = Scene.from_dict(scene_fields_)
-        sim = Simulation(scene)
-        first = sim.stats()
-        energy_0 = first["kinetic_energy"]
-        if equilibrate > 0:
-            sim.advance(equilibrate)
+        schedule = pieces(equilibrate, measure, blocks, every)
+        progress = _task_progress(checkpoint, task, run_of)
+        if progress is None:
+            sim = Simulation(scene)
+            energy_0 = sim.stats()["kinetic_energy"]
+            values = {name: [] for name in OBSERVABLES}
+            done, start_pairs = 0, None
+        else:
+            sim = read_simulation(checkpoint, 0, track_images=False)
+            energy_0, values = progress["energy_0"], progress["values"]
+            done, start_pairs = progress["piece"], progress["start_pairs"]
+        resumed_at = sim.time
+        last = sim.time
         before = sim.stats()
-        start = before
+        if start_pairs is None and schedule[done][1] is not None:  # no equilibration left: measuring starts now
+            start_pairs = before["pair_collisions"]
         radius = 0.5 * (scene.radius[0] + scene.radius[1])
-        values = {name: [] for name in OBSERVABLES}
-        for k in range(blocks):
-            sim.advance(equilibrate + measure * (k + 1) / blocks - sim.time)
-            after = sim.stats()
-            row = interval(before, after, scene.n, scene.box, scene.boundary, radius,
-                           2.0 * scene.radius[0] if scene.radius[0] == scene.radius[1] else None)
-            for name in ("compressibility", "collision_rate", "pressure", "wall_pressure", "temperature",
-                         "reduced_pressure"):
-                values[name].append(row[name])
-            if "hexatic_order" in kept:  # measured only when asked for: a pass over the neighbours
-                values["hexatic_order"].append(hexatic_order(psi6(sim.state().pos, sim.box, sim.periodic)))
-            values["energy_change"].append((after["kinetic_energy"] - before["kinetic_energy"]) / energy_0
-                                           if energy_0 > 0 else 0.0)
-            before = after
-        return {"blocks": values, "pair_collisions": before["pair_collisions"] - start["pair_collisions"],
-                "seconds": time.perf_counter() - started, "pid": os.getpid()}
+        for index in range(done, len(schedule)):
+            target, block = schedule[index]
+            sim.advance(target - sim.time)
+            if block is None:
+                if index + 1 < len(schedule) and schedule[index + 1][1] is not None:  # the equilibration's end
+                    before = sim.stats()
+                    start_pairs = before["pair_collisions"]
+            else:
+                after = sim.stats()
+                row = interval(before, after, scene.n, scene.box, scene.boundary, radius,
+                               2.0 * scene.radius[0] if scene.radius[0] == scene.radius[1] else None)
+                for name in ("compressibility", "collision_rate", "pressure", "wall_pressure", "temperature",
+                             "reduced_pressure"):
+                    values[name].append(row[name])
+                if "hexatic_order" in kept:  # measured only when asked for: a pass over the neighbours
+                    values["hexatic_order"].append(hexatic_order(psi6(sim.state().pos, sim.box, sim.periodic)))
+                values["energy_change"].append((after["kinetic_energy"] - before["kinetic_energy"]) / energy_0
+                                               if energy_0 > 0 else 0.0)
+                before = after
+            if checkpoint is not None and every is not None and index + 1 < len(schedule) \
+                    and sim.time - last >= every:
+                restart.write(checkpoint, sim, {"task": task, "piece": index + 1, "energy_0": energy_0,
+                                                "values": values, "start_pairs": start_pairs})
+                last = sim.time
+        if checkpoint is not None:
+            try:
+                os.unlink(checkpoint)
+            except FileNotFoundError:
+                pass
+        return {"blocks": values, "pair_collisions": before["pair_collisions"] - start_pairs,
+                "seconds": time.perf_counter() - started, "pid": os.getpid(), "resumed_at": resumed_at}
+
+
+def _task_progress(path, task, run_of):
+    """The progress a checkpoint at `path` holds of the task `task`, or None: no file, a file
+    gsd cannot read, or one of another task (left by a sweep that was changed)."""
+    if path is None or not os.path.exists(path):
+        return None
+    try:
+        progress = run_of(path)
+    except (RuntimeError, OSError, ValueError):
+        return None
+    if not progress or progress.get("task") != task:
+        return None
+    return progress
 
 
 def point_row(sweep, index, results):
@@ -478,8 +556,14 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
             if on_row is not None:
                 on_row(row)
 
+    checkpoints = os.path.join(out, CHECKPOINTS) if sweep.checkpoint_every is not None else None
+    if checkpoints is not None:
+        os.makedirs(checkpoints, exist_ok=True)
+
     def args(task):
-        return (sweep.point_scene(*task), sweep.equilibrate, sweep.measure, sweep.blocks, threads, sweep.observables)
+        where = None if checkpoints is None else os.path.join(checkpoints, f"point-{task[0]}-repeat-{task[1]}.gsd")
+        return (sweep.point_scene(*task), sweep.equilibrate, sweep.measure, sweep.blocks, threads, sweep.observables,
+                where, sweep.checkpoint_every)
 
     try:
         if client is None:
@@ -500,6 +584,8 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
                     future.cancel()
     finally:
         file.close()
+    if checkpoints is not None and not any(p.endswith(".gsd") for p in os.listdir(checkpoints)):
+        shutil.rmtree(checkpoints, ignore_errors=True)  # every task ended: what is left are temporary names
     return SweepRun(ran=todo, skipped=skipped, rows=rows, results=results, wall_s=time.perf_counter() - started)
 
 

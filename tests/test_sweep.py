@@ -149,6 +149,103 @@ def test_a_worker_killed_mid_sweep_loses_no_point(serial, cluster, tmp_path):
     assert table(tmp_path / "out") == table(serial_out)
 
 
+#: The tiny sweep with tasks of a few seconds that keep a checkpoint after each block.
+CHECKPOINTED = TINY.replace("equilibrate = 0.5", "equilibrate = 3.0").replace("measure = 2.0", "measure = 60.0") \
+    .replace("blocks = 4", "blocks = 6\ncheckpoint_every = 1.4")
+
+
+def test_pieces_cut_the_equilibration_only_with_checkpoints():
+    assert sweeps.pieces(3.0, 6.0, 3) == [(3.0, None), (5.0, 0), (7.0, 1), (9.0, 2)]
+    assert sweeps.pieces(3.0, 6.0, 3, every=1.4) == [(1.4, None), (2.8, None), (3.0, None), (5.0, 0), (7.0, 1),
+                                                     (9.0, 2)]
+    assert sweeps.pieces(0.0, 2.0, 2, every=1.0) == [(1.0, 0), (2.0, 1)]
+
+
+def test_a_task_that_died_goes_on_from_its_checkpoint_with_the_same_result(circles_cpu, tmp_path, monkeypatch):
+    """A task stopped right after its third checkpoint (the process dies: here an exception),
+    run again, goes on from that checkpoint, does only the rest, and returns what a task never
+    stopped returns; its checkpoint is gone once it ends."""
+    from circles import checkpoint
+
+    sweep = sweeps.read_sweep(write(tmp_path, CHECKPOINTED))
+    args = (sweep.point_scene(1, 0), sweep.equilibrate, sweep.measure, sweep.blocks, None, sweep.observables)
+    path = tmp_path / "task.gsd"
+    whole = sweeps.run_task(*args, str(path), sweep.checkpoint_every)
+    assert whole["resumed_at"] == 0.0 and not path.exists()
+
+    written = []
+    real = checkpoint.write
+
+    def dies_after_the_third(*a, **k):
+        real(*a, **k)
+        written.append(a[1].time)
+        if len(written) == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(checkpoint, "write", dies_after_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_task(*args, str(path), sweep.checkpoint_every)
+    monkeypatch.setattr(checkpoint, "write", real)
+    # Checkpoints at the equilibration's pieces 1.4 and 2.8, then at the first block's end.
+    assert written == [1.4, 2.8, 13.0] and path.exists()
+    again = sweeps.run_task(*args, str(path), sweep.checkpoint_every)
+    assert again["resumed_at"] == 13.0
+    assert json.dumps(again["blocks"], sort_keys=True) == json.dumps(whole["blocks"], sort_keys=True)  # every value, bit for bit (NaN too)
+    assert again["pair_collisions"] == whole["pair_collisions"]
+    assert not path.exists()
+    # A checkpoint of another task is not taken up: it starts from the beginning.
+    monkeypatch.setattr(checkpoint, "write", dies_after_the_third)
+    written.clear()
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_task(*args, str(path), sweep.checkpoint_every)
+    monkeypatch.setattr(checkpoint, "write", real)
+    other = sweeps.run_task(sweep.point_scene(1, 1), *args[1:], str(path), sweep.checkpoint_every)
+    assert other["resumed_at"] == 0.0
+
+
+@pytest.mark.cluster
+def test_a_worker_killed_mid_task_resumes_the_task_from_its_checkpoint(cluster, tmp_path):
+    """The worker running a task is killed once the task has written a checkpoint; the task
+    runs again on a live worker from that checkpoint (it simulates less than a whole task) and
+    the results equal those of the sweep run in this process without a stop."""
+    import threading
+    import time
+
+    sweep = sweeps.read_sweep(write(tmp_path, CHECKPOINTED))
+    out = tmp_path / "out"
+    killed = {}
+
+    def kill_when_a_checkpoint_appears():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed.get("done"):
+            folder = out / sweeps.CHECKPOINTS
+            names = [p.name for p in folder.glob("point-*.gsd")] if folder.exists() else []
+            for name in names:
+                point, repeat = int(name.split("-")[1]), int(name.split("-")[3].split(".")[0])
+                for address, keys in cluster.processing().items():
+                    if any(key.endswith(f"-{point}-{repeat}") for key in keys):
+                        pid = cluster.run(os.getpid)[address]
+                        killed.update(pid=pid, task=(point, repeat))
+                        os.kill(pid, signal.SIGKILL)
+                        return
+            time.sleep(0.02)
+
+    watcher = threading.Thread(target=kill_when_a_checkpoint_appears)
+    watcher.start()
+    try:
+        run = sweeps.run_sweep(sweep, out, client=cluster, threads=1)
+    finally:
+        killed["done"] = True
+        watcher.join()
+    assert "task" in killed, "no task was caught with a checkpoint"
+    result = run.results[killed["task"]]
+    assert result["pid"] != killed["pid"] and result["resumed_at"] > 0
+    assert not (out / sweeps.CHECKPOINTS).exists()
+    serial_out = tmp_path / "serial"
+    sweeps.run_sweep(sweep, serial_out)
+    assert table(out) == table(serial_out)
+
+
 # ---- bad sweep files ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("change, words", [
