@@ -809,8 +809,10 @@ def main(argv):
                                                      for n in sweep.observables), flush=True)
 
         run = run_sweep(sweep, out, client=client, threads=threads, on_row=on_row)
+        resumed = sum(1 for result in run.results.values() if result.get("resumed_at", 0.0) > 0)
         print(f"done        {len(run.ran)} points run, {len(run.skipped)} already in {os.path.join(out, RESULTS)}, "
-              f"{run.wall_s:.1f} s", flush=True)
+              f"{run.wall_s:.1f} s" + (f"; {resumed} tasks went on from their checkpoints" if resumed else ""),
+              flush=True)
         try:
             paths = plot_sweep(sweep, out)
             print(f"plots       {', '.join(paths)}")
