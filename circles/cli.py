@@ -615,6 +615,9 @@ def _run(scene, options):
     first = point.frame if point is not None else 0
     if point is not None:
         print(f"circles: continuing from frame {first} (t = {sim.time:.6g} s) of {point.source}", file=sys.stderr)
+    elif options.get("resume"):
+        print("circles: the files hold no restart point yet (no trajectory frame, no checkpoint): the run starts "
+              "again from the beginning, and gives the same rows", file=sys.stderr)
     run_start = point.start if point is not None else sim.time
     setup_s = time.perf_counter() - started
     clock = {"simulate": 0.0, "render": 0.0, "write": 0.0}
