@@ -44,10 +44,10 @@ def scene_flags(scheme, boundary, precision, frames=40):
             "--fps", "10", "--out", "none", "--threads", "1"]
 
 
-def straight_and_resumed(tmp_path, flags, data, stop_at, sig=signal.SIGKILL):
+def straight_and_resumed(tmp_path, flags, data, stop_at, sig=signal.SIGKILL, says="continuing from frame"):
     """Run `flags` + `data` (file names, in tmp_path/straight and tmp_path/stopped) straight
-    through, and again stopped with `sig` once its table holds `stop_at` rows, then resumed.
-    Returns the two folders."""
+    through, and again stopped with `sig` once its table holds `stop_at` rows, then resumed
+    (saying `says` on stderr). Returns the two folders."""
     straight, stopped = tmp_path / "straight", tmp_path / "stopped"
     straight.mkdir()
     stopped.mkdir()
@@ -58,7 +58,7 @@ def straight_and_resumed(tmp_path, flags, data, stop_at, sig=signal.SIGKILL):
     assert code == (-signal.SIGKILL if sig == signal.SIGKILL else 130), err
     resumed = run_cli(["run", *flags, *data, "--resume"], stopped)
     assert resumed.returncode == 0, resumed.stderr
-    assert "continuing from frame" in resumed.stderr
+    assert says in resumed.stderr
     return straight, stopped
 
 
@@ -99,6 +99,13 @@ def test_a_table_without_a_trajectory_resumes_from_its_checkpoint(circles_cpu, t
     straight, stopped = straight_and_resumed(tmp_path, scene_flags("event", "periodic", "f64"), data, 17)
     assert (straight / "run.csv").read_bytes() == (stopped / "run.csv").read_bytes()
     assert_same_checkpoints(straight / "run.checkpoint.gsd", stopped / "run.checkpoint.gsd")
+
+
+def test_a_table_without_restart_points_starts_again_and_gives_the_same_rows(circles_cpu, tmp_path):
+    data = ["--stats", "run.csv"]
+    straight, stopped = straight_and_resumed(tmp_path, scene_flags("event", "walls", "f64", frames=15), data, 6,
+                                             says="the run starts again from the beginning")
+    assert (straight / "run.csv").read_bytes() == (stopped / "run.csv").read_bytes()
 
 
 def test_a_run_stopped_by_ctrl_c_keeps_a_checkpoint_where_it_stopped(circles_cpu, tmp_path):
