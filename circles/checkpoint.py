@@ -33,7 +33,7 @@ def write(path, sim, progress, tracker=None):
     short = path.name.encode()[:100].decode(errors="ignore")
     part = path.with_name(f".{short}.{os.getpid()}.part")
     try:
-        with GSDWriter(part, "w", tracker=tracker if tracker is not None else False, run=progress) as writer:
+        with GSDWriter(part, tracker=False if tracker is None else tracker, run=progress) as writer:
             writer.write(sim)
         descriptor = os.open(part, os.O_RDONLY)
         try:
@@ -60,4 +60,4 @@ def read(path):
         raise ValueError(f"{path} is not a checkpoint that circles wrote: gsd cannot read it ({error})") from None
     if progress is None:
         raise ValueError(f"{path} is not a checkpoint that circles wrote: it has no log/circles/run chunk")
-    return read_simulation(path, 0), progress
+    return read_simulation(path), progress

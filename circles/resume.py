@@ -60,13 +60,12 @@ def difference(held, wanted):
 @dataclass
 class RestartPoint:
     """Where a run goes on: the state of frame instant `frame` (`frame` rows of stats written)
-    in the file `source` (frame `index` of it), at simulated time `time`; `refire` True when
-    that frame's writers have still to run (a checkpoint's); `start` the simulated time of
-    frame 0; `row` the stats row of the interval that ended at a checkpoint (what that
-    frame's writers get first)."""
+    in the last frame of the file `source`, at simulated time `time`; `refire` True when that
+    frame's writers have still to run (a checkpoint's); `start` the simulated time of frame 0;
+    `row` the stats row of the interval that ended at a checkpoint (what that frame's writers
+    get first)."""
 
     source: object
-    index: int
     frame: int
     time: float
     refire: bool
@@ -77,7 +76,7 @@ class RestartPoint:
         """The simulation in this state, its image flags carried on (`trajectory.read_simulation`)."""
         from .trajectory import read_simulation
 
-        return read_simulation(self.source, self.index)
+        return read_simulation(self.source)
 
 
 def _refuse(text):
@@ -96,11 +95,12 @@ def _check_identity(path, held, wanted):
                       "drop --resume (with --force to overwrite the files)")
 
 
-def _time_of(path, index):
+def _last_time(path):
+    """The simulated time of the last frame of a GSD file that `trajectory.GSDWriter` wrote."""
     import gsd.fl
 
     with gsd.fl.open(name=str(path), mode="r") as file:
-        return float(file.read_chunk(index, "log/circles/time")[0])
+        return float(file.read_chunk(file.nframes - 1, "log/circles/time")[0])
 
 
 def restart_point(trajectory, checkpoint_path, wanted):
@@ -130,31 +130,26 @@ def restart_point(trajectory, checkpoint_path, wanted):
             raise _refuse(f"{checkpoint_path} is not a checkpoint gsd can read ({error}): remove it to go on from "
                           "the trajectory's last frame") from None
         _check_identity(checkpoint_path, progress and progress.get("run"), wanted)
-    newest = progress["frame"] if progress else -1
-    if newest > frames - 1:  # the checkpoint is newer than the trajectory's last frame
+    if progress is not None and progress["frame"] >= frames:  # newer than the trajectory's last frame
+        newest = progress["frame"]
         if trajectory is not None and frames != newest:
             raise _refuse(f"{checkpoint_path} is of frame {newest}, but {trajectory} holds {frames} frames, not the "
                           f"{newest} before it: the files are not of one run")
-        return RestartPoint(checkpoint_path, 0, int(newest), _time_of(checkpoint_path, 0), True,
+        return RestartPoint(checkpoint_path, int(newest), _last_time(checkpoint_path), True,
                             float(progress["start"]), progress.get("row"))
     if frames:
-        held = run_of(trajectory)
-        return RestartPoint(trajectory, frames - 1, frames - 1, _time_of(trajectory, frames - 1), False,
-                            float(held.get("start", _time_of(trajectory, 0))))
+        return RestartPoint(trajectory, frames - 1, _last_time(trajectory), False, float(held["start"]))
     return None
 
 
 def check_schedule(point, times, fps):
     """Refuse a restart point that the run's frame instants (`writers.frame_times`, from its
     start) cannot go on from: one past the run's end, or a run's end between two frames."""
-    frames = len(times) - 1
-    end = point.start + times[-1]
-    if point.frame > frames or (point.frame == frames and point.time != end):
+    if point.frame > len(times) - 1 or point.time > point.start + times[-1]:
         raise _refuse(f"the run reached t = {point.time:.6g} s ({point.frame} frames), beyond this --duration "
                       f"{times[-1]:g} s: give a --duration of at least {point.time - point.start:.6g}")
-    if point.frame < frames:
-        expected = point.start + times[point.frame]
-        if not math.isclose(point.time, expected, rel_tol=1e-12, abs_tol=1e-300):
-            raise _refuse(f"the run stopped at t = {point.time:.6g} s, between frames (the frame instant there is "
-                          f"{expected:.6g} s at {fps:g} fps): only a run whose duration is a whole number of frames "
-                          "can be made longer")
+    expected = point.start + times[point.frame]  # the last of the times is the run's end
+    if not math.isclose(point.time, expected, rel_tol=1e-12):
+        raise _refuse(f"the run stopped at t = {point.time:.6g} s, between frames (the frame instant there is "
+                      f"{expected:.6g} s at {fps:g} fps): only a run whose duration is a whole number of frames "
+                      "can be made longer")
