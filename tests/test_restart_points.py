@@ -212,13 +212,24 @@ def test_a_continued_table_keeps_its_first_rows_and_goes_on(tmp_path):
     lines = path.read_text().split("\n")
     assert lines[0] == header and lines[-1] == ""
     assert [line.split(",")[0] for line in lines[1:-1]] == ["0.0", "1.0", "2.0", "7.0"]
-    with pytest.raises(ValueError, match=r"holds 4 rows, fewer than the 5 the run had written"):
+    with pytest.raises(ValueError) as refused:
         StatsWriter(path, keep=5)
-    with pytest.raises(ValueError, match=r"is not the stats table of this run: its header is 'time,kinetic_energy"):
+    assert str(refused.value) == (f"{path} holds 4 rows, fewer than the 5 the run had written by its restart point: "
+                                  "it is not this run's table")
+    with StatsWriter(path, keep=4) as table:  # all of them
+        assert table.rows == 4
+    assert path.read_text() == "\n".join(lines[:-1]) + "\n"
+    with pytest.raises(ValueError) as refused:
         StatsWriter(path, order=True, keep=1)
+    assert str(refused.value) == (f"{path} is not the stats table of this run: its header is {header[:80]!r}, not that "
+                                  "of --order --stats")
     (tmp_path / "empty.csv").write_text("")
-    with pytest.raises(ValueError, match="its header is 'nothing'"):
+    with pytest.raises(ValueError, match=r"empty.csv is not the stats table of this run: its header is 'nothing', not "
+                                         r"that of --stats$"):
         StatsWriter(tmp_path / "empty.csv", keep=0)
+    (tmp_path / "binary.csv").write_bytes(b"\xff\xfe,time\n1,2\n")
+    with pytest.raises(ValueError, match="its header is '\ufffd\ufffd,time', not that of --stats$"):
+        StatsWriter(tmp_path / "binary.csv", keep=1)
 
 
 def test_a_run_continued_from_frame_k_advances_to_the_same_instants(circles_cpu):
