@@ -60,6 +60,9 @@ from . import observables
 from .command import make_folder
 from .writers import row_of
 
+#: The per-circle sums behind the stats totals, in the order of log/circles/totals, and their types.
+SHARES = {"pair_count": np.int32, "wall_count": np.int32, "virial": np.float64, "wall_impulse": np.float64}
+
 #: Types are named "A", "B", ... one per distinct radius, up to MOST_TYPES; more radii than that
 #: (a continuous range) get one type for all.
 MOST_TYPES = 26
@@ -177,7 +180,7 @@ class GSDWriter:
         self.tracker = tracker
         self.order = bool(order)
         self.run = run
-        self._own_tracker = False  # a tracker this writer attached, detached again by close
+        self._made_tracker = None  # the tracker this writer attached, detached again by close
         self.frames = self._file.nframes
         self.seconds = 0.0  # spent writing, wall-clock
         self.cpu_seconds = 0.0  # the process's processor time meanwhile
@@ -193,8 +196,7 @@ class GSDWriter:
             if sim.steps > 0:
                 raise ValueError("a periodic run's trajectory must start before its first step, so that every "
                                  "wrap is counted: make the GSDWriter (or an ImageTracker) at the start")
-            self.tracker = ImageTracker(sim)
-            self._own_tracker = True
+            self.tracker = self._made_tracker = ImageTracker(sim)
         if stats is None or row is None:
             stats = sim.stats()
         if row is None:
@@ -258,8 +260,8 @@ class GSDWriter:
         self.cpu_seconds += clock.process_time() - cpu
 
     def close(self):
-        if self._own_tracker:
-            self.tracker.detach()
+        if self._made_tracker is not None:
+            self._made_tracker.detach()
         self._file.close()
 
     def __enter__(self):
@@ -280,55 +282,51 @@ def read_simulation(path, frame=-1, *, track_images=True):
 
     from .simulation import Simulation
 
-    with gsd.hoomd.open(str(path), "r") as traj:
+    with gsd.hoomd.open(str(path)) as traj:
         if len(traj) == 0:
             raise ValueError(f"{path} holds no frames")
         snap = traj[frame]
-        first = traj[0] if len(traj) > 1 else snap
-        log = snap.log
+        log = snap.log  # gsd.hoomd gives every frame the first frame's radii, masses and colours
         if "particles/circles/position" not in log:
             raise ValueError(f"{path} was not written by circles (no log/particles/circles/position chunk): "
                              "read it with gsd.hoomd")
-        pos = np.asarray(log["particles/circles/position"])
-        vel = np.asarray(log["particles/circles/velocity"])
-        radius = np.asarray(first.log["particles/circles/radius"], np.float64)
-        mass = np.asarray(first.log["particles/circles/mass"], np.float64)
-        color = np.asarray(first.log["particles/circles/color"], np.uint8)
-        box = tuple(float(x) for x in (log["circles/box"] if "circles/box" in log else snap.configuration.box[:2]))
-        text = {name: bytes(np.asarray(log[f"circles/{name}"], np.uint8)).decode() for name in ("boundary", "scheme")}
-        precision = "f32" if int(log["circles/precision_bits"][0]) == 32 else "f64"
-        totals = np.asarray(log["circles/totals"], np.float64)
-        fields = dict(pos=pos, vel=vel, radius=radius, mass=mass, color=color, box=np.array(box),
-                      boundary=text["boundary"], scheme=text["scheme"], precision=precision,
+        # Files written before the box was kept in float64 have only the float32 one.
+        box = log["circles/box"] if "circles/box" in log else snap.configuration.box[:2]
+        fields = dict(pos=log["particles/circles/position"], vel=log["particles/circles/velocity"],
+                      radius=log["particles/circles/radius"], mass=log["particles/circles/mass"],
+                      color=log["particles/circles/color"], box=np.array(box, np.float64),
+                      boundary=bytes(log["circles/boundary"]).decode(), scheme=bytes(log["circles/scheme"]).decode(),
+                      precision="f32" if int(log["circles/precision_bits"][0]) == 32 else "f64",
                       dt=float(log["circles/dt"][0]), time=float(log["circles/time"][0]),
                       steps=int(snap.configuration.step))
-        n = len(radius)
-        shares = {name: log.get(f"particles/circles/{name}") for name in ("pair_count", "wall_count", "virial",
-                                                                           "wall_impulse")}
-        for name, total, dtype in (("pair_count", totals[0], np.int32), ("wall_count", totals[1], np.int32),
-                                   ("virial", totals[2], np.float64), ("wall_impulse", totals[3], np.float64)):
-            # Each circle's share where the frame has them (a periodic box has no wall shares: 0);
-            # else the totals sit on circle 0 (and any beyond int32's range spread over circles).
-            values = np.zeros(n, dtype)
-            if shares[name] is not None:
-                values[:] = shares[name]
-            elif shares["pair_count"] is not None:
-                pass
-            elif dtype is np.int32:
-                whole = int(total)
-                most = np.iinfo(np.int32).max
-                k = 0
-                while whole > 0:
-                    values[k] = min(whole, most)
-                    whole -= values[k]
-                    k += 1
-            else:
-                values[0] = total
-            fields[name] = values
-        image = np.asarray(snap.particles.image) if fields["boundary"] == "periodic" else None
+        n = len(fields["radius"])
+        if "particles/circles/pair_count" in log:  # each circle's share (a periodic box: none of the walls')
+            for name, dtype in SHARES.items():
+                fields[name] = log.get(f"particles/circles/{name}", np.zeros(n, dtype))
+        else:
+            fields.update(_totals_on_circle_0(log["circles/totals"], n))
+        image = snap.particles.image if fields["boundary"] == "periodic" else None
     sim = Simulation._from_fields(fields)
     sim.image_tracker = ImageTracker(sim, image) if image is not None and track_images else None
     return sim
+
+
+def _totals_on_circle_0(totals, n):
+    """Per-circle sums for a frame of a file written before the shares were kept: each total
+    on circle 0, and a count beyond int32's range spread over the first circles."""
+    fields = {}
+    for name, total in zip(SHARES, totals):
+        values = np.zeros(n, SHARES[name])
+        if SHARES[name] is np.int32:
+            whole, k = int(total), 0
+            while whole > 0:
+                values[k] = min(whole, np.iinfo(np.int32).max)
+                whole -= int(values[k])
+                k += 1
+        else:
+            values[0] = total
+        fields[name] = values
+    return fields
 
 
 def run_of(path):
@@ -344,12 +342,12 @@ def run_of(path):
 
 def unwrapped(frame):
     """Unwrapped positions (N, 2) float64 of a gsd.hoomd frame, box-centred:
-    position + image * (Lx, Ly), from the full-precision positions where the frame has them."""
-    box = np.asarray(frame.configuration.box[:2], np.float64)
-    if "particles/circles/position" in frame.log:
-        pos = np.asarray(frame.log["particles/circles/position"], np.float64) - 0.5 * box
+    position + image * (Lx, Ly), from the full-precision positions and box where the frame has
+    them."""
+    log = frame.log
+    box = np.asarray(log["circles/box"] if "circles/box" in log else frame.configuration.box[:2], np.float64)
+    if "particles/circles/position" in log:
+        pos = log["particles/circles/position"] - 0.5 * box
     else:
-        pos = np.asarray(frame.particles.position[:, :2], np.float64)
-    return pos + np.asarray(frame.particles.image[:, :2], np.float64) * box
-
-
+        pos = frame.particles.position[:, :2]
+    return pos + frame.particles.image[:, :2] * box

@@ -214,3 +214,109 @@ def test_a_restarted_run_goes_on_with_the_same_trajectory(circles_cpu, tmp_path)
             for chunk in ("position", "velocity", "image"):
                 np.testing.assert_array_equal(getattr(a[k].particles, chunk), getattr(b[k].particles, chunk))
             assert a[k].configuration.step == b[k].configuration.step
+
+
+def test_check_path_refuses_with_the_fix_and_makes_missing_folders(tmp_path):
+    from circles.trajectory import check_path
+
+    made = []
+    path = check_path(tmp_path / "a" / "b" / "run.gsd", made=made)
+    assert path == tmp_path / "a" / "b" / "run.gsd" and made == [tmp_path / "a", tmp_path / "a" / "b"]
+    assert (tmp_path / "a" / "b").is_dir() and not path.exists()
+    assert check_path(str(tmp_path / "RUN.GSD")) == tmp_path / "RUN.GSD"  # the suffix in any case
+    for bad, words in ((tmp_path / "run.csv", f"--trajectory {tmp_path / 'run.csv'}: the file name must end in .gsd, "
+                                              "e.g. run.gsd"),
+                       (tmp_path / "a.gsd", f"--trajectory {tmp_path / 'a.gsd'} is a folder: give a file's path, such "
+                                            f"as {tmp_path / 'a.gsd' / 'run.gsd'}")):
+        if bad.suffix == ".gsd":
+            bad.mkdir()
+        with pytest.raises(ValueError) as refused:
+            check_path(bad)
+        assert str(refused.value) == words
+    (tmp_path / "old.csv").write_text("x")
+    with pytest.raises(ValueError) as refused:
+        check_path(tmp_path / "old.csv", suffix=".csv", what="--stats")
+    assert str(refused.value) == (f"--stats {tmp_path / 'old.csv'} exists: give --force to overwrite it, --resume to "
+                                  "continue its run, or another name")
+    assert check_path(tmp_path / "old.csv", force=True, suffix=".csv") == tmp_path / "old.csv"
+
+
+def test_frames_of_older_files_restart_from_their_totals(circles_cpu, tmp_path):
+    """A frame without each circle's shares (and without the float64 box), as circles wrote
+    them before: the totals go on circle 0, a count beyond int32 spread over the first circles."""
+    import gsd.fl
+
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=30, box=(3.0, 2.0), radius=0.1, speed=(1.0, 2.0), seed=3))
+    sim.advance(1.0)
+    path, old = tmp_path / "new.gsd", tmp_path / "old.gsd"
+    with GSDWriter(path) as writer:
+        writer.write(sim)
+    totals = np.array([5e9, 7.0, 1.25, 2.5])
+    with gsd.fl.open(str(path), "r") as new, gsd.fl.open(str(old), "w", application="circles", schema="hoomd",
+                                                          schema_version=[1, 4]) as out:
+        for name in new.find_matching_chunk_names(""):
+            if name in ("log/circles/box", "log/circles/totals") or name.startswith("log/particles/circles/") and \
+                    name.split("/")[-1] in ("pair_count", "wall_count", "virial", "wall_impulse"):
+                continue
+            out.write_chunk(name, new.read_chunk(0, name))
+        out.write_chunk("log/circles/totals", totals)
+        out.end_frame()
+    again = read_simulation(old)
+    fields = again._fields()
+    assert again.box == (3.0, 2.0)
+    assert fields["pair_count"][:3].tolist() == [2 ** 31 - 1, 2 ** 31 - 1, 5 * 10 ** 9 - 2 * (2 ** 31 - 1)]
+    assert fields["pair_count"][3:].sum() == 0 and fields["wall_count"].tolist() == [7] + [0] * 29
+    assert fields["virial"].tolist() == [1.25] + [0.0] * 29 and fields["wall_impulse"].tolist() == [2.5] + [0.0] * 29
+    stats = again.stats()
+    assert (stats["pair_collisions"], stats["wall_collisions"], stats["virial"], stats["wall_impulse"]) == \
+        (5 * 10 ** 9, 7, 1.25, 2.5)
+
+
+def test_the_writer_and_reader_refuse_with_one_line(circles_cpu, tmp_path):
+    import gsd.fl
+
+    periodic = circles_cpu.Simulation(periodic_scene(circles_cpu))
+    path = tmp_path / "run.gsd"
+    with GSDWriter(path) as writer:
+        assert (writer.frames, writer.seconds, writer.cpu_seconds, writer.order) == (0, 0.0, 0.0, False)
+        periodic.step(1)
+        with pytest.raises(ValueError) as refused:
+            writer.write(periodic)
+    assert str(refused.value) == ("a periodic run's trajectory must start before its first step, so that every wrap "
+                                  "is counted: make the GSDWriter (or an ImageTracker) at the start")
+    with gsd.fl.open(str(path), "r") as file:
+        assert file.schema == "hoomd" and tuple(file.schema_version) == (1, 4) and file.nframes == 0
+    with pytest.raises(ValueError, match=f"^{path} holds no frames$"):
+        read_simulation(path)
+    with gsd.fl.open(str(tmp_path / "hoomd.gsd"), "w", application="hoomd", schema="hoomd",
+                     schema_version=[1, 4]) as file:
+        file.write_chunk("particles/N", np.array([1], np.uint32))
+        file.end_frame()
+    with pytest.raises(ValueError) as refused:
+        read_simulation(tmp_path / "hoomd.gsd")
+    assert str(refused.value) == (f"{tmp_path / 'hoomd.gsd'} was not written by circles (no "
+                                  "log/particles/circles/position chunk): read it with gsd.hoomd")
+    walls = circles_cpu.Simulation(circles_cpu.Scene(n=5, box=(3.0, 2.0), radius=0.1, seed=1))
+    with pytest.raises(ValueError) as refused:
+        ImageTracker(walls)
+    assert str(refused.value) == "image flags count wraps of a periodic box; this simulation has walls"
+    tracker = ImageTracker(circles_cpu.Simulation(periodic_scene(circles_cpu)))
+    assert tracker in tracker.sim.after_step
+    tracker.detach()
+    assert tracker not in tracker.sim.after_step
+    tracker.detach()  # again: nothing to do
+    with GSDWriter(tmp_path / "order.gsd", order=1) as writer:
+        assert writer.order is True
+
+
+def test_unwrapped_takes_the_float32_positions_of_a_frame_without_the_full_ones():
+    import gsd.hoomd
+
+    frame = gsd.hoomd.Frame()
+    frame.configuration.box = [4.0, 2.0, 0, 0, 0, 0]
+    frame.particles.N = 2
+    frame.particles.position = np.array([[0.5, -0.25, 0.0], [-1.0, 0.75, 0.0]], np.float32)
+    frame.particles.image = np.array([[1, 0, 0], [-2, 3, 0]], np.int32)
+    got = unwrapped(frame)
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got, [[4.5, -0.25], [-9.0, 6.75]])
