@@ -320,3 +320,25 @@ def test_unwrapped_takes_the_float32_positions_of_a_frame_without_the_full_ones(
     got = unwrapped(frame)
     assert got.dtype == np.float64
     np.testing.assert_array_equal(got, [[4.5, -0.25], [-9.0, 6.75]])
+
+
+def test_order_writes_each_circles_psi6_and_the_global_order(circles_cpu, tmp_path):
+    """With order=True a frame holds psi_6 of each circle (real, imaginary) in creation order and
+    |mean psi_6|, as circles.order computes them from the frame's positions; without, neither."""
+    from circles.order import hexatic_order, psi6
+
+    sim = circles_cpu.Simulation(periodic_scene(circles_cpu, n=60))
+    sim.advance(0.3)
+    path = tmp_path / "order.gsd"
+    with GSDWriter(path, order=True, tracker=False) as writer:
+        writer.write(sim)
+    with gsd.hoomd.open(str(path)) as traj:
+        log = traj[0].log
+    local = psi6(sim.state().pos, sim.box, True)
+    np.testing.assert_array_equal(log["particles/circles/psi6"], np.stack([local.real, local.imag], axis=1))
+    assert log["circles/hexatic_order"].tolist() == [hexatic_order(local)]
+    assert 0 < hexatic_order(local) < 1
+    with GSDWriter(tmp_path / "plain.gsd", tracker=False) as writer:
+        writer.write(sim)
+    with gsd.hoomd.open(str(tmp_path / "plain.gsd")) as traj:
+        assert "particles/circles/psi6" not in traj[0].log and "circles/hexatic_order" not in traj[0].log
