@@ -154,6 +154,8 @@ def test_the_schedule_refuses_a_point_past_the_end_or_between_frames(circles_cpu
         resume.check_schedule(point(4, 0.35), frame_times(1.0, 10), 10)
     with pytest.raises(UsageError, match="beyond this --duration"):
         resume.check_schedule(point(4, 0.45), frame_times(0.4, 10), 10)
+    with pytest.raises(UsageError, match="beyond this --duration"):  # a frame past the last, at the end's time
+        resume.check_schedule(point(5, 0.4), frame_times(0.4, 10), 10)
     with pytest.raises(UsageError, match="between frames"):  # off by 1e-10 of itself: not a frame instant
         resume.check_schedule(point(4, 0.4 * (1 + 1e-10)), frame_times(1.0, 10), 10)
 

@@ -421,3 +421,32 @@ def test_the_reduced_pressures_plot_draws_each_start_beside_the_published_series
     sweeps.run_sweep(sweep, tmp_path / "out")
     (path,) = sweeps.plot_sweep(sweep, tmp_path / "out")
     assert path.endswith("reduced_pressure.png") and os.path.getsize(path) > 10_000
+
+
+def test_the_sweep_command_is_described_in_the_command_lines_help(capsys):
+    """`circles --help` lists the sweep command, and `circles sweep --help` its arguments."""
+    from circles import cli
+
+    assert cli.main(["--help"]) == 0
+    assert "run many scenes on Dask and measure each" in capsys.readouterr().out
+    assert cli.main(["sweep", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for words in ("sweep file: [scene], [vary] and [sweep] tables", sweeps.DESCRIPTION.split(".")[0],
+                  "--workers N worker processes of the local cluster (default: one per core; 0 runs the tasks one by "
+                  "one in this process, without Dask)", "--scheduler ADDRESS the address of a running Dask scheduler",
+                  "--out DIR folder for results.csv and the plots (default outputs/SWEEP, after the file's name)"):
+        assert " ".join(words.split()) in text, words
+
+
+def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread():
+    cluster = sweeps.local_cluster(1, threads_per_worker=2)
+    try:
+        client = distributed.Client(cluster)
+        info = client.scheduler_info()
+        (address, worker), = info["workers"].items()
+        assert worker["nthreads"] == 2
+        assert client.run(os.getpid)[address] != os.getpid()  # a process of its own
+        assert cluster.dashboard_link and ":8787" not in cluster.dashboard_link  # a free port, not the default
+        client.close()
+    finally:
+        cluster.close()

@@ -342,3 +342,21 @@ def test_order_writes_each_circles_psi6_and_the_global_order(circles_cpu, tmp_pa
         writer.write(sim)
     with gsd.hoomd.open(str(tmp_path / "plain.gsd")) as traj:
         assert "particles/circles/psi6" not in traj[0].log and "circles/hexatic_order" not in traj[0].log
+
+
+def test_older_totals_go_on_circle_0_as_32_bit_counts():
+    from circles.trajectory import _totals_on_circle_0
+
+    fields = _totals_on_circle_0(np.array([2.0 ** 31, 3.0, 0.5, 0.25]), 4)
+    assert fields["pair_count"].dtype == np.int32 and fields["wall_count"].dtype == np.int32
+    assert fields["pair_count"].tolist() == [2 ** 31 - 1, 1, 0, 0] and fields["wall_count"].tolist() == [3, 0, 0, 0]
+    assert fields["virial"].dtype == np.float64 and fields["virial"].tolist() == [0.5, 0.0, 0.0, 0.0]
+    assert fields["wall_impulse"].tolist() == [0.25, 0.0, 0.0, 0.0]
+
+
+def test_a_trajectory_in_a_folder_that_cannot_be_made_names_itself(tmp_path):
+    from circles.trajectory import check_path
+
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ValueError, match=f"--trajectory {tmp_path / 'file' / 'run.gsd'}"):
+        check_path(tmp_path / "file" / "run.gsd")
