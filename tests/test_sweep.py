@@ -450,3 +450,142 @@ def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread(
         client.close()
     finally:
         cluster.close()
+
+
+# ---- the command's words and the theory it compares with, exactly ----------------------------
+
+def test_the_command_says_what_it_ran_line_by_line(serial, tmp_path, capsys):
+    """Every line `circles sweep --workers 0` prints, word for word (numbers as the rows hold
+    them), and the rerun's."""
+    import re
+
+    sweep, serial_out = serial
+    path = write(tmp_path, TINY)
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = sweeps.load_rows(out, sweep)
+    points = [f"point       area_fraction {values['area_fraction']}: " + ", ".join(
+        f"{n} {float(row[n]):.4g} +- {float(row[n + '_se']):.2g}" for n in sweep.observables) for values, row in rows]
+    worst = max(sweeps.deviations(sweep, rows), key=lambda d: abs(d[3]))
+    assert lines[0] == "sweep       3 points x 2 repeats on this process, task by task"
+    assert lines[1:4] == points
+    assert re.fullmatch(rf"done        3 points run, 0 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
+                        lines[4])
+    assert lines[5] == "plots       " + ", ".join(str(out / f"{n}.png") for n in sweep.observables)
+    assert lines[6] == (f"liu         largest deviation of Z from Liu's: {100 * worst[3]:+.2f}% ({worst[4]:+.1f} "
+                        f"standard errors) at area fraction {worst[0]:g}")
+    assert len(lines) == 7
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    again = capsys.readouterr().out.splitlines()
+    assert again[0] == lines[0] and again[2:] == lines[5:]
+    assert re.fullmatch(rf"done        0 points run, 3 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
+                        again[1])
+
+
+def test_the_command_puts_results_under_outputs_by_default(serial, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path, TINY, name="tiny.sweep.toml")
+    assert sweeps.main(["sweep", str(path), "--workers", "0"]) == 0
+    assert (tmp_path / "outputs" / "tiny.sweep" / "results.csv").exists()
+    assert "already in outputs/tiny.sweep/results.csv" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--workers", "-1"], "--workers -1 must be from 0 (no Dask: this process) to 4096"),
+    (["--workers", "4097"], "--workers 4097 must be from 0 (no Dask: this process) to 4096"),
+    (["--out", "FILE"], "--out FILE is a file: give a folder"),
+])
+def test_the_command_refuses_bad_arguments_in_one_line(tmp_path, capsys, args, words):
+    path = write(tmp_path, TINY)
+    (tmp_path / "file").write_text("x")
+    args = [str(tmp_path / "file") if a == "FILE" else a for a in args]
+    words = words.replace("FILE", str(tmp_path / "file"))
+    assert sweeps.main(["sweep", str(path), *args]) == 2
+    assert capsys.readouterr().err == f"circles: error: {words}\n"
+
+
+def test_the_command_without_dask_says_how_to_get_it(tmp_path, capsys, monkeypatch):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_dask(name, *args, **kwargs):
+        if name == "distributed":
+            raise ImportError("no distributed")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_dask)
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "2", "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == ("circles: error: circles sweep runs its tasks on Dask, which is not installed: "
+                                       "pip install 'circles-sim[sweep]', or give --workers 0 to run them one by one "
+                                       "here\n")
+    assert sweeps.main(["sweep", "--help"]) == 0
+    assert capsys.readouterr().out.startswith("usage: circles sweep ")
+
+
+def test_theory_gives_liu_and_enskog_for_equal_disks_in_a_periodic_box():
+    """Liu's Z and Enskog's rate at the point, with the density and mass worked out here; none
+    for several radii, walls, or a varied box; the published pressure where one exists."""
+    from circles.theory import enskog_rate, liu_z
+
+    sweep = sweeps.sweep_from_dict(tomllib_loads(TINY))
+    n, r, eta, kT = 40, 0.05, 0.3, 0.7
+    rho = eta / (math.pi * r * r)  # n circles of area pi r^2 fill eta of the box
+    found = sweeps.theory(sweep, {"area_fraction": eta}, {"temperature": str(kT)})
+    assert found["compressibility"] == pytest.approx(liu_z(eta), rel=1e-12)  # the box's area fraction, to round-off
+    assert found["collision_rate"] == pytest.approx(enskog_rate(eta, rho, 2 * r, kT, 1.0), rel=1e-12)
+    assert set(found) == {"compressibility", "collision_rate"}
+    for mass, m in (("radius", r), ("area", math.pi * r * r)):
+        other = sweeps.sweep_from_dict(tomllib_loads(TINY.replace('mass = "equal"', f'mass = "{mass}"')))
+        rate = sweeps.theory(other, {"area_fraction": eta}, {"temperature": str(kT)})["collision_rate"]
+        assert rate == pytest.approx(enskog_rate(eta, rho, 2 * r, kT, m), rel=1e-12)
+    for change in (("radius = 0.05", "radius = [0.04, 0.05]"), ('boundary = "periodic"', 'boundary = "walls"')):
+        assert sweeps.theory(sweeps.sweep_from_dict(tomllib_loads(TINY.replace(*change))), {"area_fraction": eta},
+                             {"temperature": "1"}) == {}
+    boxes = sweeps.sweep_from_dict(tomllib_loads(TINY.replace("area_fraction = [0.1, 0.3, 0.5]",
+                                                              "box = [[2.0, 2.0], [3.0, 3.0]]")))
+    assert sweeps.theory(boxes, {"box": [2.0, 2.0]}, {"temperature": "1"}) == {}
+    # The melting sweep's system: Li et al.'s event-chain value at 0.698, N = 870 (circles/data).
+    melting = sweeps.read_sweep("scenes/melting_sweep.toml")
+    published = sweeps.theory(melting, {"area_fraction": 0.698, "start": "fluid"}, {"temperature": "1"})
+    li = [p for p in __import__("circles.reference", fromlist=["x"]).pressures(n=870) if p.eta == 0.698]
+    assert published["reduced_pressure"] == li[0].beta_p_d2 and published["reduced_pressure_se"] == li[0].se
+    assert 9.0 < published["reduced_pressure"] < 9.3
+
+
+def test_deviations_are_relative_and_in_standard_errors():
+    sweep = sweeps.sweep_from_dict(tomllib_loads(TINY))
+    from circles.theory import liu_z
+
+    rows = [({"area_fraction": 0.3}, {"compressibility": "2.0", "compressibility_se": "0.05", "temperature": "1"}),
+            ({"area_fraction": 0.5}, {"compressibility": "4.0", "compressibility_se": "0", "temperature": "1"})]
+    (a, got, want, rel, sigmas), (b, *_, nan) = sweeps.deviations(sweep, rows)
+    assert (a, got, b) == (0.3, 2.0, 0.5) and want == pytest.approx(liu_z(0.3), rel=1e-12)
+    assert rel == 2.0 / want - 1.0 and sigmas == (2.0 - want) / 0.05 and math.isnan(nan)
+    assert sweeps.deviations(sweep, rows, "pressure") == []
+
+
+def test_the_published_series_is_drawn_with_its_source(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from circles import reference
+
+    melting = sweeps.read_sweep("scenes/melting_sweep.toml")
+    fig, ax = plt.subplots()
+    sweeps._plot_published(ax, melting, {"area_fraction": 0.698, "start": "fluid"})
+    li = reference.series(870, 29 / (30 * math.sqrt(3) / 2))
+    (line,) = ax.get_lines()
+    assert ax.get_legend_handles_labels()[1] == [f"{li[0].source} ({li[0].method}), N = 870"]
+    assert list(line.get_xdata()) == [p.eta for p in li] and list(line.get_ydata()) == [p.beta_p_d2 for p in li]
+    assert line.get_color() == "0.3" and line.get_linewidth() == 1 and line.get_linestyle() == "-"
+    plt.close(fig)
+
+
+def tomllib_loads(text):
+    import tomllib
+
+    return tomllib.loads(textwrap.dedent(text))
