@@ -800,10 +800,7 @@ def main(argv):
         from .kernel_cache import announce
         from .scene import Scene
         announce(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", threads or 0)
-        count = [0]
-
         def on_row(row):
-            count[0] += 1
             shown = ", ".join(f"{k} {row[k]}" for k in sweep.varied)
             print(f"point       {shown}: " + ", ".join(f"{n} {float(row[n]):.4g} +- {float(row[n + '_se']):.2g}"
                                                      for n in sweep.observables), flush=True)
@@ -811,7 +808,7 @@ def main(argv):
         run = run_sweep(sweep, out, client=client, threads=threads, on_row=on_row)
         resumed = sum(1 for result in run.results.values() if result.get("resumed_at", 0.0) > 0)
         print(f"done        {len(run.ran)} points run, {len(run.skipped)} already in {os.path.join(out, RESULTS)}, "
-              f"{run.wall_s:.1f} s" + (f"; {resumed} tasks went on from their checkpoints" if resumed else ""),
+              f"{run.wall_s:.1f} s" + (f"; tasks that went on from a checkpoint: {resumed}" if resumed else ""),
               flush=True)
         try:
             paths = plot_sweep(sweep, out)

@@ -589,3 +589,33 @@ def tomllib_loads(text):
     import tomllib
 
     return tomllib.loads(textwrap.dedent(text))
+
+
+def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, tmp_path, capsys, monkeypatch):
+    """A task stopped after its second checkpoint (an exception here, a dead worker on a
+    cluster): the rerun of the command goes on from it and says so."""
+    import re
+
+    from circles import checkpoint
+
+    path = write(tmp_path, CHECKPOINTED.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]")
+                 .replace("repeats = 2", "repeats = 1"))
+    out = tmp_path / "out"
+    real, calls = checkpoint.write, []
+
+    def dies_after_the_second(*a, **k):
+        real(*a, **k)
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(checkpoint, "write", dies_after_the_second)
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 130
+    assert (out / sweeps.CHECKPOINTS / "point-0-repeat-0.gsd").exists()
+    monkeypatch.setattr(checkpoint, "write", real)
+    capsys.readouterr()
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    done = [line for line in capsys.readouterr().out.splitlines() if line.startswith("done")]
+    assert re.fullmatch(r"done        1 points run, 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
+                        r"checkpoint: 1", done[0])
+    assert not (out / sweeps.CHECKPOINTS).exists()
