@@ -669,41 +669,49 @@ def plot_sweep(sweep, out):
     import matplotlib.pyplot as plt
 
     rows = load_rows(out, sweep)
-    x_key, others = sweep.varied[0], sweep.varied[1:]
     paths = []
     for name in sweep.observables:
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
-        groups = {}
-        for values, row in rows:
-            groups.setdefault(tuple(json.dumps(values[k]) for k in others), []).append((values, row))
-        for group, members in groups.items():
-            x = [_number_of(v[x_key]) for v, _ in members]
-            y = [float(r[name]) for _, r in members]
-            e = [float(r[f"{name}_se"]) for _, r in members]
-            label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
-            ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
-            values, row = members[0]
-            if name == "reduced_pressure":  # the published series, once, in place of a curve of theory
-                if x_key == "area_fraction" and group == next(iter(groups)):
-                    _plot_published(ax, sweep, values)
-            elif theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
-                # A smooth curve through the points' range, at the first point's temperature.
-                grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]
-                curve = [theory(sweep, {**values, x_key: g}, row)[name] for g in grid]
-                theory_name = {"compressibility": "Liu", "collision_rate": "Enskog (Liu's g)"}[name]
-                ax.plot(grid, curve, "-", color="0.3", lw=1, label=theory_name)
-        ax.set_xlabel(x_key)
-        ax.set_ylabel(LABELS[name])
-        if name == "compressibility" and x_key == "area_fraction":
-            ax.set_yscale("log")
-        ax.set_title(os.path.basename(sweep.source) or "sweep", fontsize=10)
-        ax.legend(fontsize=8)
+        fig = sweep_figure(sweep, rows, name)
         fig.tight_layout()
         path = os.path.join(out, f"{name}.png")
         fig.savefig(path)
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+def sweep_figure(sweep, rows, name):
+    """The figure of one observable (`plot_sweep`) of the rows (`load_rows`)."""
+    import matplotlib.pyplot as plt
+
+    x_key, others = sweep.varied[0], sweep.varied[1:]
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+    groups = {}
+    for values, row in rows:
+        groups.setdefault(tuple(json.dumps(values[k]) for k in others), []).append((values, row))
+    for group, members in groups.items():
+        x = [_number_of(v[x_key]) for v, _ in members]
+        y = [float(r[name]) for _, r in members]
+        e = [float(r[f"{name}_se"]) for _, r in members]
+        label = ", ".join(f"{k} {g}" for k, g in zip(others, group)) or "measured"
+        ax.errorbar(x, y, yerr=e, fmt="o", ms=4, capsize=2, label=label)
+        values, row = members[0]
+        if name == "reduced_pressure":  # the published series, once, in place of a curve of theory
+            if x_key == "area_fraction" and group == next(iter(groups)):
+                _plot_published(ax, sweep, values)
+        elif theory(sweep, values, row).get(name) is not None and x_key == "area_fraction" and len(x) > 1:
+            # A smooth curve through the points' range, at the first point's temperature.
+            grid = [min(x) + (max(x) - min(x)) * k / 200 for k in range(201)]
+            curve = [theory(sweep, {**values, x_key: g}, row)[name] for g in grid]
+            theory_name = {"compressibility": "Liu", "collision_rate": "Enskog (Liu's g)"}[name]
+            ax.plot(grid, curve, "-", color="0.3", lw=1, label=theory_name)
+    ax.set_xlabel(x_key)
+    ax.set_ylabel(LABELS[name])
+    if name == "compressibility" and x_key == "area_fraction":
+        ax.set_yscale("log")
+    ax.set_title(os.path.basename(sweep.source) or "sweep", fontsize=10)
+    ax.legend(fontsize=8)
+    return fig
 
 
 def _plot_published(ax, sweep, values):

@@ -420,7 +420,13 @@ def test_the_reduced_pressures_plot_draws_each_start_beside_the_published_series
     sweep = sweeps.read_sweep(write(tmp_path, text))
     sweeps.run_sweep(sweep, tmp_path / "out")
     (path,) = sweeps.plot_sweep(sweep, tmp_path / "out")
-    assert path.endswith("reduced_pressure.png") and os.path.getsize(path) > 10_000
+    assert path == str(tmp_path / "out" / "reduced_pressure.png") and os.path.getsize(path) > 10_000
+    rows = sweeps.load_rows(tmp_path / "out", sweep)
+    fig = sweeps.sweep_figure(sweep, rows, "reduced_pressure")
+    (ax,) = fig.axes
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels == ['start "fluid"', "Li2022 (ECMC), N = 870", 'start "crystal"']  # the published series once
+    assert ax.get_yscale() == "linear" and ax.get_ylabel() == sweeps.LABELS["reduced_pressure"]
 
 
 def test_the_sweep_command_is_described_in_the_command_lines_help(capsys):
@@ -619,3 +625,44 @@ def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, 
     assert re.fullmatch(r"done        1 points run, 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
                         r"checkpoint: 1", done[0])
     assert not (out / sweeps.CHECKPOINTS).exists()
+
+
+def test_a_figure_holds_the_points_their_errors_and_the_theory_curve(serial):
+    """The compressibility figure of the tiny sweep: its points with one standard error, Liu's
+    curve through their range (201 points, at the first point's temperature), labels, a log
+    scale and the file's name as title; the energy change has no theory and a linear scale."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from circles.theory import liu_z
+
+    sweep, out = serial
+    rows = sweeps.load_rows(out, sweep)
+    x = [float(values["area_fraction"]) for values, _ in rows]
+    fig = sweeps.sweep_figure(sweep, rows, "compressibility")
+    (ax,) = fig.axes
+    assert tuple(fig.get_size_inches()) == (6.4, 4.2) and fig.dpi == 100
+    points, curve = ax.get_lines()[0], ax.get_lines()[-1]
+    assert list(points.get_xdata()) == x
+    assert list(points.get_ydata()) == [float(row["compressibility"]) for _, row in rows]
+    assert points.get_marker() == "o" and points.get_markersize() == 4 and points.get_linestyle() == "None"
+    bars = ax.containers[0].lines[2][0].get_segments()
+    assert [seg[1][1] - seg[0][1] for seg in bars] == pytest.approx(
+        [2 * float(row["compressibility_se"]) for _, row in rows], rel=1e-12)
+    assert len(ax.containers[0].lines[1]) == 2  # caps, below and above
+    grid = curve.get_xdata()
+    assert len(grid) == 201 and grid[0] == min(x) and grid[-1] == pytest.approx(max(x), rel=1e-15)
+    np.testing.assert_allclose(curve.get_ydata(), [liu_z(g) for g in grid], rtol=1e-12)
+    assert curve.get_color() == "0.3" and curve.get_linewidth() == 1
+    assert ax.get_legend_handles_labels()[1] == ["Liu", "measured"]
+    assert [t.get_fontsize() for t in ax.get_legend().get_texts()] == [8, 8]
+    assert ax.get_xlabel() == "area_fraction" and ax.get_ylabel() == sweeps.LABELS["compressibility"]
+    assert ax.get_yscale() == "log" and ax.get_title() == "sweep.toml" and ax.title.get_fontsize() == 10
+    plt.close(fig)
+    fig = sweeps.sweep_figure(sweep, rows, "collision_rate")
+    assert fig.axes[0].get_legend_handles_labels()[1] == ["Enskog (Liu's g)", "measured"]
+    assert fig.axes[0].get_yscale() == "linear"
+    plt.close(fig)
+    fig = sweeps.sweep_figure(sweep, rows, "energy_change")
+    assert len(fig.axes[0].get_lines()) == 1 + 2  # the points and their caps: no curve
+    plt.close(fig)
