@@ -723,7 +723,7 @@ def _plot_published(ax, sweep, values):
     for (source, method), points in itertools.groupby(series(scene.n, scene.box[0] / scene.box[1]),
                                                       key=lambda p: (p.source, p.method)):
         points = list(points)
-        ax.errorbar([p.eta for p in points], [p.beta_p_d2 for p in points], yerr=[p.se for p in points], fmt="-",
+        ax.errorbar([p.eta for p in points], [p.beta_p_d2 for p in points], yerr=[p.se for p in points],
                     color="0.3", lw=1, label=f"{source} ({method}), N = {scene.n}")
 
 
@@ -743,8 +743,8 @@ DESCRIPTION = ("Run every point of a sweep file (a base scene and the fields to 
 
 def add_sweep_command(commands):
     """The `circles sweep` subcommand, on the command line's subparsers."""
-    _sweep_arguments(commands.add_parser("sweep", help="run many scenes on Dask and measure each",
-                                         description=DESCRIPTION))
+    # Listed in `circles --help` only: `circles sweep ...` goes to `main`, whose parser is its own.
+    _sweep_arguments(commands.add_parser("sweep", help="run many scenes on Dask and measure each"))
 
 
 def _sweep_arguments(sweep):

@@ -345,7 +345,7 @@ def unwrapped(frame):
     position + image * (Lx, Ly), from the full-precision positions and box where the frame has
     them."""
     log = frame.log
-    box = np.asarray(log["circles/box"] if "circles/box" in log else frame.configuration.box[:2], np.float64)
+    box = np.asarray(log["circles/box"] if "circles/box" in log else frame.configuration.box[:2])
     if "particles/circles/position" in log:
         pos = log["particles/circles/position"] - 0.5 * box
     else:

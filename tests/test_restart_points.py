@@ -44,6 +44,8 @@ def test_identity_names_the_scene_the_frame_rate_and_the_order(circles_cpu):
     coloured = CircleList(**{**circles.__dict__, "color": np.array([[1, 2, 3], [4, 5, 6]])})
     recoloured = CircleList(**{**circles.__dict__, "color": np.array([[1, 2, 3], [4, 5, 7]])})
     assert resume.identity(coloured, 30, False) != resume.identity(recoloured, 30, False)
+    as_bytes = CircleList(**{**circles.__dict__, "color": np.array([[1, 2, 3], [4, 5, 6]], np.uint8)})
+    assert resume.identity(coloured, 30, False) == resume.identity(as_bytes, 30, False)  # the colours, not their type
 
 
 def test_difference_names_the_first_field_that_differs():

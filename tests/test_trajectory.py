@@ -360,3 +360,20 @@ def test_a_trajectory_in_a_folder_that_cannot_be_made_names_itself(tmp_path):
     (tmp_path / "file").write_text("x")
     with pytest.raises(ValueError, match=f"--trajectory {tmp_path / 'file' / 'run.gsd'}"):
         check_path(tmp_path / "file" / "run.gsd")
+
+
+def test_unwrapped_takes_the_full_precision_box_where_the_frame_has_it(circles_cpu, tmp_path):
+    """In a box whose sides float32 does not hold, the unwrapped positions come from the float64
+    positions and box: position - W/2 + image W, exactly."""
+    sim = circles_cpu.Simulation(circles_cpu.Scene(n=20, box=(3.1, 2.3), radius=0.05, speed=(2.0, 3.0),
+                                                   boundary="periodic", seed=2))
+    with GSDWriter(tmp_path / "run.gsd") as writer:
+        writer.write(sim)
+        sim.advance(1.5)
+        writer.write(sim)
+        image = writer.tracker.images()
+    with gsd.hoomd.open(str(tmp_path / "run.gsd")) as traj:
+        frame = traj[1]
+    box = np.array([3.1, 2.3])
+    assert np.abs(image).max() > 0
+    np.testing.assert_array_equal(unwrapped(frame), sim.state().pos - 0.5 * box + image * box)
