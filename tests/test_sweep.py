@@ -447,7 +447,7 @@ def test_the_sweep_command_is_described_in_the_command_lines_help(capsys):
 
 
 def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread():
-    cluster = sweeps.local_cluster(1, threads_per_worker=1)  # Dask alone would make one per core here
+    cluster = sweeps.local_cluster(1)  # one thread by default; Dask alone would make a worker per core here
     try:
         client = distributed.Client(cluster)
         info = client.scheduler_info()
