@@ -503,6 +503,8 @@ def test_the_command_puts_results_under_outputs_by_default(serial, tmp_path, mon
     (["--workers", "-1"], "--workers -1 must be from 0 (no Dask: this process) to 4096"),
     (["--workers", "4097"], "--workers 4097 must be from 0 (no Dask: this process) to 4096"),
     (["--out", "FILE"], "--out FILE is a file: give a folder"),
+    (["--workers", "4096", "--out", "FILE"], "--out FILE is a file: give a folder"),  # 4096 workers may be asked for
+    (["--workers", "4097", "--out", "FILE"], "--workers 4097 must be from 0 (no Dask: this process) to 4096"),
 ])
 def test_the_command_refuses_bad_arguments_in_one_line(tmp_path, capsys, args, words):
     path = write(tmp_path, TINY)
@@ -572,6 +574,13 @@ def test_deviations_are_relative_and_in_standard_errors():
     assert (a, got, b) == (0.3, 2.0, 0.5) and want == pytest.approx(liu_z(0.3), rel=1e-12)
     assert rel == 2.0 / want - 1.0 and sigmas == (2.0 - want) / 0.05 and math.isnan(nan)
     assert sweeps.deviations(sweep, rows, "pressure") == []
+    # A row without the observable is passed over, and the rows after it are still compared.
+    assert [d[0] for d in sweeps.deviations(sweep, [({"area_fraction": 0.1}, {"temperature": "1"}), *rows])] == \
+        [0.3, 0.5]
+    # No theory (a varied box): nothing to compare, whatever the rows hold.
+    boxes = sweeps.sweep_from_dict(tomllib_loads(TINY.replace("area_fraction = [0.1, 0.3, 0.5]",
+                                                              "box = [[2.0, 2.0], [3.0, 3.0]]")))
+    assert sweeps.deviations(boxes, [({"box": [2.0, 2.0]}, rows[0][1])]) == []
 
 
 def test_the_published_series_is_drawn_with_its_source(tmp_path):
