@@ -679,3 +679,40 @@ def test_a_figure_holds_the_points_their_errors_and_the_theory_curve(serial):
     fig = sweeps.sweep_figure(sweep, rows, "energy_change")
     assert len(fig.axes[0].get_lines()) == 1 + 2  # the points and their caps: no curve
     plt.close(fig)
+
+
+def test_sweep_json_records_what_fixes_the_rows(serial, tmp_path):
+    """DIR/sweep.json: the base scene, the varied fields and the measurement, and the SHA-256 of
+    them as sorted JSON, worked out here; checkpoint_every only when given."""
+    import hashlib
+
+    sweep, out = serial
+    held = json.loads((out / "sweep.json").read_text())
+    identity = {"scene": {"n": 40, "radius": 0.05, "speed": [1.0, 1.0], "mass": "equal", "boundary": "periodic",
+                          "seed": 3},
+                "varied": ["area_fraction"], "repeats": 2, "equilibrate": 0.5, "measure": 2.0, "blocks": 4,
+                "observables": ["compressibility", "collision_rate", "energy_change"]}
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
+    assert held == {"fingerprint": digest, **identity}
+    assert (out / "sweep.json").read_text().startswith('{\n "fingerprint": ')  # indented by one
+    checkpointed = sweeps.read_sweep(write(tmp_path, CHECKPOINTED))
+    assert checkpointed.identity()["checkpoint_every"] == 1.4
+    assert checkpointed.identity()["equilibrate"] == 3.0 and checkpointed.identity()["measure"] == 60.0
+
+
+def test_columns_keep_the_temperature_once():
+    plain = sweeps.sweep_from_dict(tomllib_loads(TINY))
+    assert sweeps.columns(plain) == ["area_fraction", "repeats", "blocks", "compressibility", "compressibility_se",
+                                     "collision_rate", "collision_rate_se", "energy_change", "energy_change_se",
+                                     "temperature", "temperature_se", "pair_collisions", "task_seconds"]
+    hot = sweeps.sweep_from_dict(tomllib_loads(TINY.replace('"energy_change"]', '"temperature"]')))
+    assert sweeps.columns(hot).count("temperature") == 1 and sweeps.columns(hot)[7] == "temperature"
+
+
+def test_the_step_bound_is_the_dt_or_the_least_radius_over_the_largest_speed():
+    from circles.scene import Scene
+
+    assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=(0.1, 0.3), speed=(0.5, 2.0))) == 0.1 / 2.0
+    assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.5, 2.0), dt=0.01)) == 0.01
+    assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.0, 0.0))) == math.inf
+    assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.5, 0.5))) == 0.2 / 0.5
