@@ -716,3 +716,42 @@ def test_the_step_bound_is_the_dt_or_the_least_radius_over_the_largest_speed():
     assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.5, 2.0), dt=0.01)) == 0.01
     assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.0, 0.0))) == math.inf
     assert sweeps._step_of(Scene(n=10, box=(5.0, 5.0), radius=0.2, speed=(0.5, 0.5))) == 0.2 / 0.5
+
+
+def test_a_points_row_holds_its_counts_the_temperature_and_the_tasks_seconds():
+    """point_row on results written here: repeats and blocks, the temperature kept though not
+    asked for, the tasks' seconds summed to the millisecond, and no standard error of one block."""
+    sweep = sweeps.sweep_from_dict(tomllib_loads(TINY.replace("repeats = 2", "repeats = 1")
+                                                 .replace("blocks = 4", "blocks = 2")))
+    blocks = {name: [1.0, 3.0] for name in sweeps.OBSERVABLES}
+    blocks["temperature"] = [0.5, 0.7]
+    row = sweeps.point_row(sweep, 1, [{"blocks": blocks, "pair_collisions": 12, "seconds": 1.23456}])
+    assert (row["area_fraction"], row["repeats"], row["blocks"]) == ("0.3", 1, 2)
+    assert float(row["temperature"]) == pytest.approx(0.6, rel=1e-15)
+    assert float(row["temperature_se"]) == pytest.approx(0.1, rel=1e-12)  # sqrt(2 * 0.1^2 / 1) / sqrt(2)
+    assert (row["compressibility"], row["compressibility_se"]) == ("2.0", "1.0")
+    assert (row["pair_collisions"], row["task_seconds"]) == (12, "1.235")
+    one = sweeps.point_row(sweep, 0, [{"blocks": {n: [2.0] for n in sweeps.OBSERVABLES}, "pair_collisions": 1,
+                                       "seconds": 0.5}])
+    assert one["compressibility"] == "2.0" and one["compressibility_se"] == "nan"
+
+
+def test_results_csv_cut_short_by_a_stop_loses_only_its_last_line(serial, tmp_path):
+    import shutil
+
+    sweep, out = serial
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    whole = (copy / "results.csv").read_bytes()
+    assert len(sweeps.read_results(copy, sweep)) == 3 and (copy / "results.csv").read_bytes() == whole
+    (copy / "results.csv").write_bytes(whole + b"0.7,2,4,1.5")
+    assert len(sweeps.read_results(copy, sweep)) == 3 and (copy / "results.csv").read_bytes() == whole
+    (copy / "sweep.json").unlink()
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_results(copy, sweep)
+    assert str(refused.value) == (f"{copy / 'results.csv'} exists without sweep.json: give another --out, or remove "
+                                  f"{copy / 'results.csv'}")
+    (copy / "sweep.json").write_text("{}")
+    unnamed = sweeps.sweep_from_dict(tomllib_loads(TINY))
+    with pytest.raises(sweeps.SweepError, match=r"differ from this one's\): give another --out, or remove"):
+        sweeps.read_results(copy, unnamed)
