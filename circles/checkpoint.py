@@ -26,23 +26,18 @@ def write(path, sim, progress, tracker=None):
     """Replace the checkpoint at `path` by the state of `sim` now and `progress` (a dict that
     JSON writes). `tracker`: the run's `trajectory.ImageTracker`, whose image flags the frame
     then holds (none without it)."""
+    from .storage import replaced_whole
     from .trajectory import GSDWriter
 
     path = Path(path)
-    # The temporary name holds at most 100 bytes of the file's (a name may take 255).
-    short = path.name.encode()[:100].decode(errors="ignore")
-    part = path.with_name(f".{short}.{os.getpid()}.part")
-    try:
+    with replaced_whole(path) as part:
         with GSDWriter(part, tracker=False if tracker is None else tracker, run=progress) as writer:
             writer.write(sim)
-        descriptor = os.open(part, os.O_RDONLY)
+        descriptor = os.open(part, os.O_RDONLY)  # on disk before it takes the old one's place
         try:
             os.fsync(descriptor)
         finally:
             os.close(descriptor)
-        os.replace(part, path)
-    finally:
-        part.unlink(missing_ok=True)
     return path
 
 

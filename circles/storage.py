@@ -1,6 +1,7 @@
 """Storage of a simulation: the file that `Simulation.save` writes and `Simulation.load` reads
 (an .npz archive of the state in creation order, exactly as stored, and what describes the
 run), checked whole before a simulation is made from it."""
+import contextlib
 import math
 import os
 import zipfile
@@ -97,13 +98,22 @@ def write_saved(path, fields) -> Path:
     if not path.parent.is_dir():
         raise FileNotFoundError(f"cannot save to {path}: the folder {path.parent} does not exist; make it first")
     fields = fields()
+    with replaced_whole(path) as part, open(part, "wb") as f:
+        np.savez(f, **fields)
+    return path
+
+
+@contextlib.contextmanager
+def replaced_whole(path):
+    """The temporary path beside `path` to write a file's new content to: renamed to `path`
+    when the block ends, removed when it fails, so that `path` holds the old file or the new
+    one whole, never a part of one."""
+    path = Path(path)
     # The temporary name holds at most 100 bytes of the file's (a name may take 255).
     short = path.name.encode()[:100].decode(errors="ignore")
     part = path.with_name(f".{short}.{os.getpid()}.part")
     try:
-        with open(part, "wb") as f:
-            np.savez(f, **fields)
+        yield part
         os.replace(part, path)
     finally:
         part.unlink(missing_ok=True)
-    return path
