@@ -640,7 +640,8 @@ def _run(scene, options):
                                      run={"run": identity, "start": run_start}))
         table = None
         if options["stats"] is not None:
-            table = StatsWriter(options["stats"], "w" if mode == "a" else mode, order=options["order"],
+            # Continued (keep=) after the rows written by the restart point; else a new table.
+            table = StatsWriter(options["stats"], mode, order=options["order"],
                                 keep=first if point is not None else None)
         tick = time.perf_counter()
         measuring = options["trajectory"] is not None or table is not None

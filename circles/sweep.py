@@ -341,7 +341,7 @@ def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=(),
     from .observables import interval
     from .order import hexatic_order, psi6
     from .scene import Scene
-    from .trajectory import read_simulation, run_of
+    from .trajectory import read_simulation
 
     task = {"scene": scene_fields_, "equilibrate": equilibrate, "measure": measure, "blocks": blocks,
             "every": every, "kept": list(kept)}
@@ -353,7 +353,7 @@ def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=(),
         started = time.perf_counter()
         scene = Scene.from_dict(scene_fields_)
         schedule = pieces(equilibrate, measure, blocks, every)
-        progress = _task_progress(checkpoint, task, run_of)
+        progress = _task_progress(checkpoint, task)
         if progress is None:
             sim = Simulation(scene)
             energy_0 = sim.stats()["kinetic_energy"]
@@ -402,9 +402,11 @@ def run_task(scene_fields_, equilibrate, measure, blocks, threads=None, kept=(),
                 "seconds": time.perf_counter() - started, "pid": os.getpid(), "resumed_at": resumed_at}
 
 
-def _task_progress(path, task, run_of):
+def _task_progress(path, task):
     """The progress a checkpoint at `path` holds of the task `task`, or None: no file, a file
     gsd cannot read, or one of another task (left by a sweep that was changed)."""
+    from .trajectory import run_of
+
     if path is None or not os.path.exists(path):
         return None
     try:
