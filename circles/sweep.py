@@ -761,6 +761,18 @@ def _sweep_arguments(sweep):
                                                     "outputs/SWEEP, after the file's name)")
 
 
+def worker_threads(cores, workers):
+    """Taichi's threads in each of `workers` worker processes on `cores` cores: the cores shared
+    out, at least one each."""
+    return max(1, cores // workers)
+
+
+def cluster_words(workers, threads):
+    """How the command names a local cluster: "a local cluster of 2 worker processes, 1 thread each"."""
+    return (f"a local cluster of {workers} worker process{'es' if workers > 1 else ''}, "
+            f"{threads} thread{'s' if threads > 1 else ''} each")
+
+
 def main(argv):
     """`circles sweep ...` (argv from "sweep" on): the exit status (0 done, 2 bad input, 1 failed,
     130 Ctrl-C)."""
@@ -800,12 +812,11 @@ def main(argv):
             where = "this process, task by task"
         else:
             workers = args.workers or cores
-            threads = max(1, cores // workers)
+            threads = worker_threads(cores, workers)
             cluster = local_cluster(workers)
             from distributed import Client
             client = Client(cluster)
-            where = f"a local cluster of {workers} worker process{'es' if workers > 1 else ''}, " \
-                    f"{threads} thread{'s' if threads > 1 else ''} each"
+            where = cluster_words(workers, threads)
         print(f"sweep       {total} points x {sweep.repeats} repeats on {where}", flush=True)
         from .kernel_cache import announce
         from .scene import Scene

@@ -276,6 +276,123 @@ def test_bad_sweep_files_are_refused_before_any_task(tmp_path, capsys, change, w
     assert not out.exists()
 
 
+OBSERVABLE_NAMES = ("compressibility, collision_rate, energy_change, pressure, wall_pressure, temperature, "
+                    "reduced_pressure, hexatic_order")
+SCENE_KEYS = "n, box, radius, speed, mass, boundary, scheme, precision, dt, seed, area_fraction, crystal, start"
+SWEEP_KEYS = "repeats, equilibrate, measure, blocks, observables, checkpoint_every"
+OUT_OF_RANGE = "is out of range: give simulated seconds"
+FRACTION = "0.1, 0.3, 0.5]"
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("[vary]\n", "[vary]\ncolour = [1, 2]\n", "[vary] unknown key colour: vary one of the Scene fields n, box, radius, "
+     "speed, mass, boundary, scheme, precision, dt, area_fraction, crystal, start"),
+    (FRACTION, "]", "[vary] area_fraction = [] must be a non-empty list of values, e.g. area_fraction = [a, b]"),
+    ("[" + FRACTION, "0.3", "[vary] area_fraction = 0.3 must be a non-empty list of values, e.g. area_fraction = "
+     "[a, b]"),
+    (FRACTION, "0.1, 0.3, 0.1]", "[vary] area_fraction lists 0.1 twice: give each value once"),
+    (FRACTION, "0.1]\nbox = [[2.0, 2.0]]", "[vary] box and area_fraction are both varied: vary one of them"),
+    ("area_fraction = [" + FRACTION, "", "[vary] is empty: give the fields to vary as lists in a [vary] table, e.g. "
+     "area_fraction = [0.1, 0.3]"),
+    ("[vary]\n", "[vary]\nseed = [1, 2]\n", "[vary] seed cannot be varied: each repeat has its own seed; set [sweep] "
+     "repeats"),
+    (FRACTION, "0.1, 0.95]", "the point area_fraction = 0.95: area_fraction = 0.95 is out of range: give a fraction > 0 "
+     "and at most the densest packing 0.9069 (below about 0.7 for a fluid)"),
+    ("radius = 0.05", "radius = -0.05", "the point area_fraction = 0.1: radius = -0.05: the smallest value -0.05 is "
+     "out of range (must be > 0)"),
+    ("repeats = 2", "repeats = 0", "[sweep] repeats = 0 must be a whole number from 1 to 1000"),
+    ("repeats = 2", "repeats = 1001", "[sweep] repeats = 1001 must be a whole number from 1 to 1000"),
+    ("repeats = 2", "repeats = true", "[sweep] repeats = True must be a whole number from 1 to 1000"),
+    ("repeats = 2", "repeats = 2.0", "[sweep] repeats = 2.0 must be a whole number from 1 to 1000"),
+    ("blocks = 4", "blocks = 0", "[sweep] blocks = 0 must be a whole number from 1 to 10000"),
+    ("blocks = 4", "blocks = 10001", "[sweep] blocks = 10001 must be a whole number from 1 to 10000"),
+    ("measure = 2.0", "measure = nan", "[sweep] measure = nan must be a finite number of simulated seconds"),
+    ("measure = 2.0", "measure = true", "[sweep] measure = True must be a finite number of simulated seconds"),
+    ("measure = 2.0", "measure = 0.0", f"[sweep] measure = 0.0 {OUT_OF_RANGE} > 0 and at most 1e+12"),
+    ("measure = 2.0", "measure = 1.0000001e12", f"[sweep] measure = 1000000100000.0 {OUT_OF_RANGE} > 0 and at most "
+     "1e+12"),
+    ("equilibrate = 0.5", "equilibrate = -0.5", f"[sweep] equilibrate = -0.5 {OUT_OF_RANGE} >= 0 and at most 1e+12"),
+    ("blocks = 4", "blocks = 4\ncheckpoint_every = 0.0", f"[sweep] checkpoint_every = 0.0 {OUT_OF_RANGE} > 0 and at "
+     "most 1e+12"),
+    ("blocks = 4", 'blocks = 4\ncheckpoint_every = "1"', "[sweep] checkpoint_every = '1' must be a finite number of "
+     "simulated seconds"),
+    ("blocks = 4", "blocks = 4\nwarmup = 3", f"[sweep] unknown key(s) warmup: known keys are {SWEEP_KEYS}"),
+    ('"energy_change"]', '"entropy"]', f"[sweep] observables: 'entropy' is unknown: use names from {OBSERVABLE_NAMES}"),
+    ('["compressibility", "collision_rate", "energy_change"]', "[]", f"[sweep] observables = [] must be a non-empty "
+     f"list of names from {OBSERVABLE_NAMES}"),
+    ('["compressibility", "collision_rate", "energy_change"]', '"compressibility"', "[sweep] observables = "
+     f"'compressibility' must be a non-empty list of names from {OBSERVABLE_NAMES}"),
+    ('["compressibility", "collision_rate", "energy_change"]', "[1]", "[sweep] observables = [1] must be a non-empty "
+     f"list of names from {OBSERVABLE_NAMES}"),
+    ('"collision_rate", "energy_change"]', '"compressibility"]', "[sweep] observables = ['compressibility', "
+     "'compressibility'] names one twice: give each once"),
+    ('["compressibility", "collision_rate", "energy_change"]', '["wall_pressure"]', "[sweep] observables: "
+     "wall_pressure needs walls, and the point's boundary is periodic: drop wall_pressure or use boundary = \"walls\""),
+    ("radius = 0.05", "radius = [0.05, 0.06]\n", None),  # accepted: reduced_pressure is not asked for
+    ('["compressibility", "collision_rate", "energy_change"]\n', '["reduced_pressure"]\n[scene.x]\n', None),
+    ("n = 40", "n = 40\nbox = [2.0, 2.0]\narea_fraction = 0.2", "[scene] box and area_fraction are both given: give "
+     "one of them"),
+    ("n = 40", "n = 40\ncolour = 3", f"[scene] unknown key(s) colour: known keys are {SCENE_KEYS}"),
+    ("seed = 3", "seed = -3", "[scene] seed = -3 must be a whole number >= 0"),
+    ("[sweep]", "[extra]\nx = 1\n[sweep]", "unknown key(s) extra: a sweep file has the tables [scene], [vary], "
+     "[sweep]"),
+    ("speed = [1.0, 1.0]", "speed = [1.0, 1.0]\ndt = 1e-12", "[sweep] equilibrate + measure = 2.5 s is 2.5e+12 steps "
+     "of the point's scene, more than 1e10: shorten them or give [scene] a longer dt"),
+])
+def test_each_refusal_of_a_sweep_file_says_its_key_value_and_fix_word_for_word(tmp_path, old, new, message):
+    """Every refusal of read_sweep, each its own line as a user reads it (after the file's name).
+    The None rows stand beside a refusal to show that its limit is where it says."""
+    assert old in TINY, old
+    text = TINY.replace(old, new, 1)
+    if new.endswith("[scene.x]\n"):  # reduced_pressure with radii that differ
+        text = text.replace("[scene.x]\n", "").replace("radius = 0.05", "radius = [0.05, 0.06]")
+        message = ("[sweep] observables: reduced_pressure (beta P d^2) needs equal disks, and the point's radii range "
+                   "from 0.05 to 0.06: drop it or give one radius")
+    path = write(tmp_path, text)
+    if message is None:
+        sweeps.read_sweep(path)
+        return
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_sweep(path)
+    assert str(refused.value) == f"{path}: {message}"
+
+
+def test_a_sweep_of_more_than_100000_tasks_is_refused_and_one_of_100000_is_not(tmp_path):
+    """101 points of n: 101 x 990 = 99990 tasks pass; 101 x 991 = 100091 do not."""
+    text = TINY.replace("n = 40\n", "").replace("area_fraction = [" + FRACTION, "n = [" + ", ".join(
+        str(40 + k) for k in range(101)) + "]")
+    assert len(sweeps.read_sweep(write(tmp_path, text.replace("repeats = 2", "repeats = 990"))).points) == 101
+    path = write(tmp_path, text.replace("repeats = 2", "repeats = 991"))
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_sweep(path)
+    assert str(refused.value) == (f"{path}: [vary] and [sweep] repeats make 101 points x 991 repeats = 100091 tasks, "
+                                  "more than 100000: split the sweep")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("n = 40\nradius = 0.05\n", "{path} is a scene file (Scene fields at top level), not a sweep file: run it with "
+     "circles run, or give a sweep file with the tables [scene], [vary], [sweep]"),
+    ("[scene]\nn = 40\n[sweep]\nrepeats = 1\n", "{path}: [vary] is missing: give the fields to vary as lists in a "
+     "[vary] table, e.g. area_fraction = [0.1, 0.3]"),
+    ("[vary]\nn = [40]\n", "{path}: [scene] is missing: give the base scene's fields in a [scene] table (n, radius, "
+     "box or area_fraction, ...)"),
+    ("scene = 3\n[vary]\nn = [40]\n", "{path}: scene = 3 must be a table [scene]: give the base scene's fields in a "
+     "[scene] table (n, radius, box or area_fraction, ...)"),
+    ("vary = [3]\n[scene]\nn = 40\n", "{path}: vary = [3] must be a table [vary]: give the fields to vary as lists in "
+     "a [vary] table, e.g. area_fraction = [0.1, 0.3]"),
+    ("sweep = 3\n[scene]\nn = 40\n[vary]\nn = [40, 41]\n", "{path}: sweep = 3 must be a table [sweep]: give repeats, "
+     "equilibrate, measure, blocks and observables in a [sweep] table"),
+    ("[scene]\nn = 40\n[vary]\nn = [40]\n[[scene.circle]]\nx = 1\n", "{path}: [scene] lists its circles "
+     "([[scene.circle]]): a sweep varies random scenes; give n, radius and the other Scene fields instead"),
+    ("[scene]\nn = 40\n[scene", "{path}: not valid TOML (Cannot declare ('scene',) twice (at end of document))"),
+])
+def test_a_file_that_is_no_sweep_file_is_refused_word_for_word(tmp_path, text, message):
+    path = write(tmp_path, text)
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_sweep(path)
+    assert str(refused.value) == message.format(path=path)
+
+
 def test_a_folder_with_another_sweeps_results_is_refused(serial, tmp_path, capsys):
     sweep, out = serial
     other = write(tmp_path, TINY.replace("measure = 2.0", "measure = 3.0"))
@@ -299,7 +416,10 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
     out = tmp_path / "out"
     assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "local cluster of 2 worker processes, 1 thread each" in said and "3 points run" in said
+    lines = said.splitlines()
+    threads = sweeps.worker_threads(os.cpu_count() or 1, 2)
+    assert lines[0] == f"sweep       3 points x 2 repeats on {sweeps.cluster_words(2, threads)}"
+    assert lines[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
     assert "deviation of Z from Liu's" in said
     assert table(out) == table(serial_out)
     for name in sweep.observables:
@@ -335,7 +455,9 @@ def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys)
     address = cluster.scheduler.address
     out = tmp_path / "out"
     assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
-    assert f"the Dask scheduler at {address}" in capsys.readouterr().out
+    said = capsys.readouterr().out.splitlines()
+    assert said[0] == f"sweep       3 points x 2 repeats on the Dask scheduler at {address}"
+    assert said[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
     assert table(out) == table(serial_out)
 
 
@@ -444,6 +566,18 @@ def test_the_sweep_command_is_described_in_the_command_lines_help(capsys):
                   "one in this process, without Dask)", "--scheduler ADDRESS the address of a running Dask scheduler",
                   "--out DIR folder for results.csv and the plots (default outputs/SWEEP, after the file's name)"):
         assert " ".join(words.split()) in text, words
+
+
+@pytest.mark.parametrize("cores, workers, threads, words", [
+    (2, 2, 1, "a local cluster of 2 worker processes, 1 thread each"),
+    (2, 1, 2, "a local cluster of 1 worker process, 2 threads each"),
+    (16, 3, 5, "a local cluster of 3 worker processes, 5 threads each"),
+    (1, 4, 1, "a local cluster of 4 worker processes, 1 thread each"),
+    (1, 1, 1, "a local cluster of 1 worker process, 1 thread each"),
+])
+def test_a_local_cluster_shares_out_the_cores_and_says_so(cores, workers, threads, words):
+    assert sweeps.worker_threads(cores, workers) == threads
+    assert sweeps.cluster_words(workers, threads) == words
 
 
 def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread():
