@@ -82,7 +82,7 @@ def _build_parser():
     parser = Parser(prog="circles", description="Simulate many elastic circles in a box "
                      "and write the run as a video, a GIF or PNG frames.")
     parser.add_argument("--version", action="version", version=version_text())
-    commands = parser.add_subparsers(dest="command", metavar="run | plot | sweep")
+    commands = parser.add_subparsers(dest="command", metavar="run | plot | sweep | compress")
     run = commands.add_parser(
         "run", help="simulate a scene and write its frames",
         description="Simulate a scene (the showcase, or SCENE.toml) and write its frames. "
@@ -90,31 +90,7 @@ def _build_parser():
     run.add_argument("scene", nargs="?", metavar="SCENE.toml",
                      help="scene file: Scene fields (or [[circle]] tables listing the "
                           "circles) at top level, a [run] table for the run options")
-    scene = run.add_argument_group("scene", _scene_defaults_text())
-    scene.add_argument("--n", type=circle_count, help="number of circles (1000000, 1_000_000 or 1e6); "
-                       "alone, the showcase's box grows with it, keeping its area fraction")
-    scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
-    scene.add_argument("--area-fraction", type=float, metavar="PHI",
-                       help="size the box for the circles to fill this fraction of it, with the aspect "
-                            "of --box (16:9 without it)")
-    scene.add_argument("--radius", type=float, nargs="+", metavar="R",
-                       help="radius R, or a range RMIN RMAX")
-    scene.add_argument("--speed", type=float, nargs="+", metavar="V",
-                       help="speed range VMIN VMAX (or one speed V)")
-    scene.add_argument("--mass", choices=("radius", "area", "equal"),
-                       help="mass proportional to the radius, to the area, or equal")
-    scene.add_argument("--boundary", choices=("walls", "periodic"))
-    scene.add_argument("--scheme", choices=("event", "discrete"),
-                       help="event: exact collisions; discrete: fast, approximate")
-    scene.add_argument("--precision", choices=("f32", "f64"))
-    scene.add_argument("--dt", type=float, help="step length in simulated seconds")
-    scene.add_argument("--seed", type=int)
-    scene.add_argument("--crystal", type=int, nargs=2, metavar=("NX", "NY"),
-                       help="a triangular crystal's columns and rows (NY even): n = NX NY equal circles in the "
-                            "periodic box of aspect NX : NY sqrt(3)/2 that it fits, sized by --area-fraction")
-    scene.add_argument("--start", choices=("fluid", "crystal"),
-                       help="fluid: circles placed at random (the default); crystal: on the perfect crystal of "
-                            "--crystal")
+    add_scene_flags(run)
     output = run.add_argument_group("run")
     output.add_argument("--duration", type=float, metavar="T",
                         help=f"simulated seconds (default {RUN_DEFAULTS['duration']:g})")
@@ -148,10 +124,41 @@ def _build_parser():
                       help="continue the run whose --stats and --trajectory files these are, from its last frame "
                            "or checkpoint: the same bits as a run never stopped")
     from .plot import add_parser as add_plot_parser
+    from .compress import add_compress_command
     from .sweep import add_sweep_command
     add_plot_parser(commands)
     add_sweep_command(commands)
+    add_compress_command(commands)
     return parser
+
+
+def add_scene_flags(parser):
+    """The flags that shape a random scene (over a scene file's fields), for `run` and `compress`."""
+    scene = parser.add_argument_group("scene", _scene_defaults_text())
+    scene.add_argument("--n", type=circle_count, help="number of circles (1000000, 1_000_000 or 1e6); "
+                       "alone, the showcase's box grows with it, keeping its area fraction")
+    scene.add_argument("--box", type=float, nargs=2, metavar=("W", "H"), help="box size")
+    scene.add_argument("--area-fraction", type=float, metavar="PHI",
+                       help="size the box for the circles to fill this fraction of it, with the aspect "
+                            "of --box (16:9 without it)")
+    scene.add_argument("--radius", type=float, nargs="+", metavar="R",
+                       help="radius R, or a range RMIN RMAX")
+    scene.add_argument("--speed", type=float, nargs="+", metavar="V",
+                       help="speed range VMIN VMAX (or one speed V)")
+    scene.add_argument("--mass", choices=("radius", "area", "equal"),
+                       help="mass proportional to the radius, to the area, or equal")
+    scene.add_argument("--boundary", choices=("walls", "periodic"))
+    scene.add_argument("--scheme", choices=("event", "discrete"),
+                       help="event: exact collisions; discrete: fast, approximate")
+    scene.add_argument("--precision", choices=("f32", "f64"))
+    scene.add_argument("--dt", type=float, help="step length in simulated seconds")
+    scene.add_argument("--seed", type=int)
+    scene.add_argument("--crystal", type=int, nargs=2, metavar=("NX", "NY"),
+                       help="a triangular crystal's columns and rows (NY even): n = NX NY equal circles in the "
+                            "periodic box of aspect NX : NY sqrt(3)/2 that it fits, sized by --area-fraction")
+    scene.add_argument("--start", choices=("fluid", "crystal"),
+                       help="fluid: circles placed at random (the default); crystal: on the perfect crystal of "
+                            "--crystal")
 
 
 def circle_count(text):
@@ -362,6 +369,18 @@ def _sized_scene_fields(fields, overrides, args):
     return merged
 
 
+def random_scene(fields, args):
+    """The `Scene` of a scene file's fields (or the showcase's) with the scene flags of `args`
+    over them; a UsageError naming the file when it is refused."""
+    from .scene import Scene
+
+    try:
+        return Scene.from_dict(_sized_scene_fields(fields, _scene_overrides(args), args))
+    except (ValueError, TypeError) as error:
+        where = f"{args.scene}: " if args.scene else ""
+        raise UsageError(f"{where}{error}") from None
+
+
 def _longest_dt(scene):
     """The longest step the scene can take, known before it is placed: its dt, the default dt of
     the circles a file lists, or for a random scene the default dt as if every circle had the
@@ -442,7 +461,6 @@ def _prepare(argv, made):
     if args.command is None:
         raise UsageError("give a command: circles run [SCENE.toml] [flags] "
                          "(see circles run --help)")
-    from .scene import Scene
     from .scenefile import lists_circles
     from .video import check_writable
 
@@ -451,11 +469,7 @@ def _prepare(argv, made):
     if args.scene and lists_circles(fields):
         scene = _circle_list(args.scene, fields, args)
     else:
-        try:
-            scene = Scene.from_dict(_sized_scene_fields(fields, _scene_overrides(args), args))
-        except (ValueError, TypeError) as error:
-            where = f"{args.scene}: " if args.scene else ""
-            raise UsageError(f"{where}{error}") from None
+        scene = random_scene(fields, args)
     options = _run_options(file_run, args)
     try:
         longest = _longest_dt(scene)
@@ -879,6 +893,8 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["sweep"]:
         return importlib.import_module(".sweep", __package__).main(argv)
+    if argv[:1] == ["compress"]:
+        return importlib.import_module(".compress", __package__).main(argv)
     if argv[:1] == ["plot"]:  # no simulation engine to import
         return importlib.import_module(".plot", __package__).main(argv[1:])
     made = []  # folders made for the output, taken away again if the run stops before writing

@@ -1,0 +1,182 @@
+"""Compression by growing disks (`circles.compress`, `circles.growth`): exact times of impact
+with growth, collision for collision against a plain-Python reference, no overlap, the target
+reached, and jamming against the published jamming fraction and the isostatic contact count."""
+
+import math
+
+import numpy as np
+import pytest
+
+from circles import compress, growth
+from circles.scene import Scene
+from growing_reference import GrowingReference, check_short_horizon, growing_time_of_impact
+from reference import pair_overlap, random_disks
+
+
+def engine(pos, vel, radius, box, periodic, mass=None, log_rows=0):
+    e = compress._Engine(np.asarray(pos, float), np.asarray(vel, float), np.asarray(radius, float),
+                         np.ones(len(radius)) if mass is None else np.asarray(mass, float), box, periodic)
+    if log_rows:
+        e.log = np.zeros((log_rows, 3))
+    return e
+
+
+# ---- one pair, one wall: times from the quadratic worked out by hand ---------------------
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_a_pair_growing_head_on_touches_when_the_quadratic_says_and_parts_faster_than_it_grows(circles_cpu,
+                                                                                                periodic):
+    """Two equal disks r0 = 0.5 at distance D = 4 closing at u = 0.3 each, radii growing at
+    g = 0.1: contact when D - 2 u t = 2 r0 (1 + g t), t = (D - 2 r0) / (2 u + 2 r0 g) = 3 / 0.7.
+    After it each moves away at u + 2 r0 g (the relative normal speed -2u becomes 2 G + 2u,
+    G = 2 r0 g)."""
+    r0, d, u, g = 0.5, 4.0, 0.3, 0.1
+    box = (20.0, 20.0)
+    e = engine([[8.0, 10.0], [8.0 + d, 10.0]], [[u, 0.0], [-u, 0.0]], [r0, r0], box, periodic, log_rows=4)
+    contact = (d - 2 * r0) / (2 * u + 2 * r0 * g)
+    e.layout(0.0, g, 1.0 + g * 5.0)
+    e.run(contact * (1 - 1e-9), 100)
+    assert e.totals[growth.PAIRS] == 0
+    e.run(contact * (1 + 1e-9), 100)
+    assert e.totals[growth.PAIRS] == 1
+    assert e.log[0, 0] == pytest.approx(contact, rel=1e-15)
+    assert list(e.log[0, 1:]) == [0, 1]
+    assert e.v[0, 0] == pytest.approx(-(u + 2 * r0 * g), rel=1e-15)
+    assert e.v[1, 0] == pytest.approx(u + 2 * r0 * g, rel=1e-15)
+    assert e.v[:, 1].tolist() == [0.0, 0.0]
+
+
+def test_a_disk_growing_into_a_wall_hits_it_when_the_gap_closes_and_leaves_faster_than_it_grows(circles_cpu):
+    """r0 = 0.5 at x = 3 moving left at 0.2, growing at g = 0.1 (its surface at 0.05): the gap
+    x - r0 (1 + g t) closes at 0.25, t = 2.5 / 0.25 = 10; it leaves at 2 r0 g + 0.2 = 0.3."""
+    e = engine([[3.0, 5.0]], [[-0.2, 0.0]], [0.5], (10.0, 10.0), False, log_rows=2)
+    e.layout(0.0, 0.1, 3.0)
+    e.run(20.0, 10)
+    assert e.totals[growth.WALLS] == 1
+    assert e.log[0, 0] == pytest.approx(10.0, rel=1e-15) and list(e.log[0, 1:]) == [0, growth.WALL_LEFT]
+    assert e.v[0].tolist() == pytest.approx([0.3, 0.0], rel=1e-15)
+    assert e.totals[growth.WALL_IMPULSE] == pytest.approx(2 * 1.0 * 0.25, rel=1e-15)
+
+
+def test_the_growing_time_of_impact_covers_each_case_of_its_quadratic():
+    """Closing: the smaller root; parting but outrun by growth: the larger; parting faster than
+    growth: never; in contact and closing: now."""
+    # dx = 3, dv = -1 (closing at 1), s = 1, growing at 0.5: 3 - t = 1 + 0.5 t -> t = 4/3
+    assert growing_time_of_impact(3.0, 0.0, -1.0, 0.0, 1.0, 0.5) == pytest.approx(4 / 3, rel=1e-15)
+    # parting at 0.2, growing at 0.5: 3 + 0.2 t = 1 + 0.5 t -> t = 2 / 0.3
+    assert growing_time_of_impact(3.0, 0.0, 0.2, 0.0, 1.0, 0.5) == pytest.approx(2 / 0.3, rel=1e-14)
+    assert growing_time_of_impact(3.0, 0.0, 0.6, 0.0, 1.0, 0.5) == math.inf
+    assert growing_time_of_impact(1.0, 0.0, -0.1, 0.0, 1.0, 0.0) == 0.0
+
+
+@pytest.mark.parametrize("boundary", ["walls", "periodic"])
+def test_the_engine_matches_the_growing_reference_collision_for_collision(circles_cpu, boundary):
+    """80 disks of radii 0.4 to 0.56, masses by area, growing at g = 0.02: the same collisions, pair by pair
+    and wall by wall, in the same order, at the same times to round-off amplified by the
+    collisions before (1e-9), as the plain-Python reference with one global heap."""
+    rng = np.random.default_rng(7)
+    box = (14.0, 14.0)
+    pos, vel, radius = random_disks(80, box, (0.4, 0.56), rng)
+    mass = radius ** 2
+    g = 0.02
+    until = 5.0 if boundary == "walls" else 1.4
+    ref = GrowingReference(pos, vel, radius, mass, box, boundary, growth=g)
+    if boundary == "periodic":
+        check_short_horizon(ref, until, 2.0)
+    ref.run(until=until)
+    events = np.array(ref.events)
+    assert len(events) > 60
+    e = engine(pos, vel, radius, box, boundary == "periodic", mass=mass, log_rows=len(events) + 10)
+    e.layout(0.0, g, 1.0 + g * until)
+    e.run(until, 10 ** 7)
+    got = e.log[: int(e.totals[growth.LOGGED])]
+    assert len(got) == len(events)
+    assert got[:, 1:].tolist() == events[:, 1:].tolist()
+    assert got[:, 0] == pytest.approx(events[:, 0], rel=1e-9)
+    assert np.max(np.abs(e.v - ref.vel)) < 1e-8
+    assert e.totals[growth.VIRIAL] == pytest.approx(ref.virial, rel=1e-9)
+    assert e.totals[growth.WALL_IMPULSE] == pytest.approx(ref.wall_impulse, rel=1e-9, abs=0)
+
+
+# ---- compressions --------------------------------------------------------------------------
+
+def bidisperse(n, fraction, seed, boundary="periodic"):
+    """n/2 disks of diameter 1 and n/2 of 1.4, equal masses, speeds 1, at `fraction`."""
+    from circles import placement
+    from circles.simulation import Simulation
+
+    rng = np.random.default_rng(seed)
+    radius = np.where(np.arange(n) < n // 2, 0.5, 0.7)
+    side = math.sqrt(np.sum(np.pi * radius ** 2) / fraction)
+    pos = placement.place(radius, (side, side), boundary == "periodic", seed, rng, single=False)
+    angle = rng.uniform(0, 2 * np.pi, n)
+    return Simulation.from_arrays(pos, np.stack([np.cos(angle), np.sin(angle)], 1), radius, "equal",
+                                  box=(side, side), boundary=boundary)
+
+
+def contacts(sim, tolerance):
+    """(mean contacts per disk, disks) once rattlers (fewer than 3 contacts) are taken away, one
+    after another: contacts are pairs whose gap is below `tolerance` of their contact distance."""
+    from scipy.spatial import cKDTree
+
+    state = sim.state()
+    pos, r, box = state.pos, state.radius, np.asarray(sim.box)
+    tree = cKDTree(pos % box, boxsize=box)
+    pairs = tree.query_pairs(2 * r.max() * (1 + tolerance), output_type="ndarray")
+    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
+    d -= box * np.round(d / box)
+    touching = pairs[np.hypot(d[:, 0], d[:, 1]) / (r[pairs[:, 0]] + r[pairs[:, 1]]) - 1 < tolerance]
+    alive = np.ones(len(r), bool)
+    while True:
+        kept = touching[alive[touching[:, 0]] & alive[touching[:, 1]]]
+        count = np.bincount(kept.ravel(), minlength=len(r))
+        rattlers = alive & (count < 3)
+        if not rattlers.any():
+            return 2 * len(kept) / alive.sum(), int(alive.sum())
+        alive &= ~rattlers
+
+
+@pytest.mark.parametrize("boundary", ["periodic", "walls"])
+def test_compression_stops_at_the_target_with_no_overlap_ever(circles_cpu, boundary):
+    """To 0.75 from 0.3: the packing's area fraction is the target to round-off, no pair of the
+    packing overlaps at all (brute force), and at every interval's end the largest overlap is
+    round-off (a few units in the last place)."""
+    sim = bidisperse(200, 0.3, 3, boundary)
+    done = compress.compress(sim, 0.75, rate=0.05)
+    assert done.stopped == "target"
+    assert done.area_fraction == pytest.approx(0.75, rel=1e-14) and done.area_fraction <= 0.75
+    state = done.simulation.state()
+    assert pair_overlap(state.pos, state.radius, sim.box if boundary == "periodic" else None) <= 0.0
+    if boundary == "walls":
+        assert np.all(state.pos - state.radius[:, None] >= 0) and np.all(state.pos + state.radius[:, None]
+                                                                          <= np.asarray(sim.box))
+    assert max(row["max_overlap"] for row in done.rows) < 1e-13
+    assert done.simulation.stats()["max_overlap"] == 0.0
+
+
+def test_a_bidisperse_mixture_jams_near_0_842_with_four_contacts_a_disk(circles_cpu):
+    """50:50 diameters 1 and 1.4, N = 256, rate 0.01 to Z > 1e6. O'Hern et al. (2003) give
+    0.842 for large N; five seeds measured 0.840 to 0.845 at this N (docs: Compression), so
+    0.842 +- 0.01. Isostatic after rattlers: 2 (N' - 1) + 1 contacts in a periodic box, a mean
+    of 4 - 2 / N'; contacts counted at gaps below 1e-4 of the contact distance, 50 times the
+    cage size 2 / Z that separates contacts at Z = 1e6."""
+    done = compress.compress(bidisperse(256, 0.3, 1), "jammed", rate=0.01)
+    assert done.stopped == "pressure" and done.compressibility > 1e6
+    assert done.area_fraction == pytest.approx(0.842, abs=0.01)
+    z, kept = contacts(done.simulation, 1e-4)
+    assert kept > 0.85 * 256
+    assert z == pytest.approx(4 - 2 / kept, abs=0.05)
+
+
+def test_bad_input_is_refused_before_any_work(circles_cpu):
+    scene = Scene(n=100, radius=0.5, area_fraction=0.3, boundary="periodic")
+    with pytest.raises(ValueError, match=r"^--rate 0.0 must be a growth rate > 0"):
+        compress.compress(scene, 0.5, rate=0.0)
+    with pytest.raises(ValueError, match=r"^--rate 0.1 with --to jammed: growth faster than 0.01"):
+        compress.compress(scene, "jammed", rate=0.1)
+    with pytest.raises(ValueError, match=r"^--to 0.95 is above the densest packing of disks, pi/sqrt\(12\) = 0.906900"):
+        compress.compress(scene, 0.95)
+    with pytest.raises(ValueError, match=r"^--to 0.2 is not above the scene's area fraction 0.3"):
+        compress.compress(scene, 0.2)
+    with pytest.raises(ValueError, match=r"^compression needs the event scheme"):
+        compress.compress(Scene(n=100, radius=0.5, area_fraction=0.3, scheme="discrete"), 0.5)
