@@ -156,9 +156,25 @@ def add_scene_flags(parser):
     scene.add_argument("--crystal", type=int, nargs=2, metavar=("NX", "NY"),
                        help="a triangular crystal's columns and rows (NY even): n = NX NY equal circles in the "
                             "periodic box of aspect NX : NY sqrt(3)/2 that it fits, sized by --area-fraction")
+    scene.add_argument("--species", type=species_entry, nargs="+", metavar="COUNT:R",
+                       help="circles of several sizes, in place of --radius: COUNT circles (or a FRACTION of --n) of "
+                            "radius R each, e.g. --species 500:0.5 500:0.7")
     scene.add_argument("--start", choices=("fluid", "crystal"),
                        help="fluid: circles placed at random (the default); crystal: on the perfect crystal of "
                             "--crystal")
+
+
+def species_entry(text):
+    """COUNT:RADIUS or FRACTION:RADIUS, as a Scene's species entry."""
+    amount, _, radius = text.partition(":")
+    try:
+        size = float(radius)
+        if amount.strip().isdigit():
+            return {"count": int(amount), "radius": size}
+        return {"fraction": float(amount), "radius": size}
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not COUNT:RADIUS or FRACTION:RADIUS (e.g. 500:0.5 or "
+                                         "0.5:0.5)") from None
 
 
 def circle_count(text):
@@ -204,6 +220,8 @@ def _scene_overrides(args):
         overrides["box"] = list(args.box)
     if args.crystal is not None:
         overrides["crystal"] = list(args.crystal)
+    if args.species is not None:
+        overrides["species"] = list(args.species)
     for key in ("radius", "speed"):
         values = getattr(args, key)
         if values is not None:
@@ -337,7 +355,7 @@ def check_frame_count(duration, fps):
 
 
 #: Flags that shape a random scene only: refused with a file that lists its circles.
-RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed", "area_fraction", "crystal", "start")
+RANDOM_SCENE_FLAGS = ("n", "radius", "speed", "seed", "area_fraction", "crystal", "start", "species")
 
 
 def _sized_scene_fields(fields, overrides, args):
@@ -350,6 +368,12 @@ def _sized_scene_fields(fields, overrides, args):
     merged = {**fields, **overrides}
     if "box" in overrides:
         merged.pop("area_fraction", None)
+    if "species" in overrides:  # a flag's sizes over the file's; counts fix n
+        merged.pop("radius", None)
+        if "n" not in overrides and all("count" in entry for entry in overrides["species"]):
+            merged.pop("n", None)
+    elif "radius" in overrides:
+        merged.pop("species", None)
     if merged.get("crystal") is not None:
         # The crystal fixes n and the box's aspect; Scene makes the box from the area fraction.
         if "crystal" in overrides and "n" not in overrides:
@@ -364,8 +388,14 @@ def _sized_scene_fields(fields, overrides, args):
     if phi is not None:
         width, height = check_box(merged.pop("box", None) or DEFAULT_BOX)
         merged.pop("area_fraction", None)
-        merged["box"] = list(box_for_area_fraction(merged.get("n", Scene.n), merged.get("radius", Scene.radius),
-                                                   phi, width / height))
+        if merged.get("species") is not None:  # Scene makes the box, of this aspect, from the species' radii
+            species = Scene.from_dict({**merged, "area_fraction": phi}).species
+            merged["box"] = list(box_for_area_fraction(sum(c for c, _ in species), (min(r for _, r in species),
+                                                       max(r for _, r in species)), phi, width / height,
+                                                       species=species))
+        else:
+            merged["box"] = list(box_for_area_fraction(merged.get("n", Scene.n), merged.get("radius", Scene.radius),
+                                                       phi, width / height))
     return merged
 
 
@@ -405,7 +435,8 @@ def _circle_list(path, fields, args):
     for key in RANDOM_SCENE_FLAGS:
         if getattr(args, key) is not None:
             raise UsageError(f"argument --{key.replace('_', '-')} does not apply to {path}: it lists its circles "
-                             "([[circle]] entries), and --n, --radius, --speed, --seed, --area-fraction, --crystal and --start only "
+                             "([[circle]] entries), and --n, --radius, --speed, --seed, --area-fraction, --crystal, --start and "
+                             "--species only "
                              "shape random scenes: drop the flag or edit the file")
     try:
         return circle_list_from_dict({**fields, **_scene_overrides(args)})

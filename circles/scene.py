@@ -270,9 +270,10 @@ def check_area_fraction_value(value):
     return value
 
 
-def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_BOX[1]):
+def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_BOX[1], species=None):
     """The box (W, H), W / H = aspect, in which n circles of radius r (or uniform in (rmin,
-    rmax)) fill the area fraction `fraction` on average: W H = n pi E[r^2] / fraction."""
+    rmax)) fill the area fraction `fraction` on average: W H = n pi E[r^2] / fraction. With
+    `species` ((count, radius) pairs, `Scene.species`) the radii are those, exactly."""
     n = scalar(n)
     if isinstance(n, bool) or not isinstance(n, Integral):
         raise ValueError(f"n = {n!r} must be a whole number of circles")
@@ -283,9 +284,54 @@ def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_B
     aspect = _finite("box aspect", aspect)
     if not aspect > 0:
         raise ValueError(f"box aspect {aspect!r} must be > 0")
+    if species is not None:
+        # sum of count (r / rhi)^2, in units of the largest radius as below
+        h = rhi * math.sqrt(math.pi * sum(c * (r / rhi) ** 2 for c, r in species) / (fraction * aspect))
+        return aspect * h, h
     a = rlo / rhi  # E[r^2] = rhi^2 (a^2 + a + 1) / 3, in units of rhi: no square of a length
     h = rhi * math.sqrt(n * math.pi * (a * a + a + 1.0) / (3.0 * fraction * aspect))
     return aspect * h, h
+
+
+def _species(value, n):
+    """`species` as ((count, radius), ...) with the counts summing to n: from entries
+    {count = C, radius = R} or {fraction = F, radius = R} (all counts or all fractions, the
+    fractions summing to 1; the last species takes what rounding leaves), or [C, R] pairs."""
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ValueError(f"species = {value!r} must be a non-empty list of {{count = C, radius = R}} or "
+                         "{fraction = F, radius = R} entries")
+    entries = []
+    for k, entry in enumerate(value):
+        if isinstance(entry, (list, tuple)) and len(entry) == 2:
+            entry = {"count": entry[0], "radius": entry[1]}
+        if not isinstance(entry, dict) or set(entry) not in ({"count", "radius"}, {"fraction", "radius"}):
+            raise ValueError(f"species[{k}] = {entry!r} must be {{count = C, radius = R}} or {{fraction = F, "
+                             "radius = R}")
+        radius = _finite(f"species[{k}] radius", entry["radius"])
+        if not radius > 0:
+            raise ValueError(f"species[{k}] radius = {radius!r} must be > 0")
+        entries.append((entry.get("count"), entry.get("fraction"), radius))
+    if all(c is not None for c, _, _ in entries):
+        counts = [check_count(f"species[{k}] count", c) for k, (c, _, _) in enumerate(entries)]
+        if any(c < 1 for c in counts):
+            raise ValueError(f"species counts {counts} must each be >= 1")
+        if n is not None and sum(counts) != n:
+            raise ValueError(f"n = {n} but the species count {' + '.join(map(str, counts))} = {sum(counts)} circles: "
+                             f"give n = {sum(counts)}, or leave n out")
+    elif all(f is not None for _, f, _ in entries):
+        fractions = [_finite(f"species[{k}] fraction", f) for k, (_, f, _) in enumerate(entries)]
+        if any(not 0 < f < 1 for f in fractions) or not math.isclose(sum(fractions), 1.0, rel_tol=1e-9):
+            raise ValueError(f"species fractions {fractions} must each be between 0 and 1 and sum to 1")
+        if n is None:
+            raise ValueError("species given as fractions need n, the number of circles")
+        counts = [round(f * n) for f in fractions[:-1]]
+        counts.append(n - sum(counts))
+        if any(c < 1 for c in counts):
+            raise ValueError(f"species fractions {fractions} of n = {n} leave a species with no circle: give more "
+                             "circles or counts")
+    else:
+        raise ValueError("species mix counts and fractions: give every species a count, or every one a fraction")
+    return tuple((c, r) for c, (_, _, r) in zip(counts, entries))
 
 
 @dataclass(frozen=True)
@@ -320,6 +366,7 @@ class Scene:
     area_fraction: float | None = None
     crystal: tuple | None = None
     start: str = "fluid"
+    species: tuple | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "n", scalar(self.n))
@@ -328,6 +375,14 @@ class Scene:
         if self.n <= 0:
             raise ValueError(f"n = {self.n} must be > 0")
         rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
+        if self.species is not None:
+            species = _species(self.species, self.n)
+            radii = (min(r for _, r in species), max(r for _, r in species))
+            if (rlo, rhi) not in (radii, (0.02, 0.05)):
+                raise ValueError(f"radius = {self.radius!r} and species are both given: the species give the radii; "
+                                 "drop radius")
+            rlo, rhi = radii
+            object.__setattr__(self, "species", species)
         _choice("start", self.start, STARTS)
         crystal = self._crystal_of(rlo, rhi)
         box = self._box_of(rlo, rhi)
@@ -342,7 +397,7 @@ class Scene:
         check_fits(rhi, box, self.boundary)
         check_room(rhi, box, self.boundary, self.precision)
         check_scale(box, rlo, vhi, self.precision)
-        check_area_fraction(self.expected_area_fraction_of(self.n, box, rlo, rhi), self.n, box)
+        check_area_fraction(self._expected_area_fraction(box, rlo, rhi), self.n, box)
         object.__setattr__(self, "n", int(self.n))
         object.__setattr__(self, "box", box)
         object.__setattr__(self, "radius", (rlo, rhi))
@@ -350,7 +405,22 @@ class Scene:
         object.__setattr__(self, "dt", dt)
         object.__setattr__(self, "seed", int(self.seed))
         object.__setattr__(self, "crystal", crystal)
-        object.__setattr__(self, "area_fraction", self.expected_area_fraction_of(self.n, box, rlo, rhi))
+        object.__setattr__(self, "area_fraction", self._expected_area_fraction(box, rlo, rhi))
+
+    def _expected_area_fraction(self, box, rlo, rhi):
+        """The area fraction the scene's circles fill on average in `box` (exactly, for species)."""
+        if self.species is not None:
+            return sum(c * math.pi * (r / box[0]) * (r / box[1]) for c, r in self.species)
+        return self.expected_area_fraction_of(self.n, box, rlo, rhi)
+
+    def radii(self, rng):
+        """The circles' radii: each species' in turn, or drawn from `rng` uniform in the range."""
+        import numpy as np
+
+        if self.species is not None:
+            return np.concatenate([np.full(c, r) for c, r in self.species])
+        rlo, rhi = self.radius
+        return rng.uniform(rlo, rhi, self.n) if rhi > rlo else np.full(self.n, rlo)
 
     def _crystal_of(self, rlo, rhi):
         """(nx, ny) checked, or None; refuses a crystal start without a crystal."""
@@ -401,9 +471,9 @@ class Scene:
         if self.box is None:
             if self.crystal is not None:
                 return box_for_area_fraction(self.n, (rlo, rhi), fraction, self.crystal_aspect())
-            return box_for_area_fraction(self.n, (rlo, rhi), fraction)
+            return box_for_area_fraction(self.n, (rlo, rhi), fraction, species=self.species)
         box = check_box(self.box)
-        held = self.expected_area_fraction_of(self.n, box, rlo, rhi)
+        held = self._expected_area_fraction(box, rlo, rhi)
         if not math.isclose(held, fraction, rel_tol=1e-9):
             raise ValueError(f"box = {list(box)!r} and area_fraction = {fraction!r} are both given, and the box "
                              f"holds these circles at area fraction {held:.6g}: give one of them")
@@ -425,6 +495,11 @@ class Scene:
             del d["crystal"]
         else:
             d["crystal"] = list(self.crystal)
+        if self.species is None:
+            del d["species"]
+        else:
+            del d["radius"]  # the species say it
+            d["species"] = [{"count": c, "radius": r} for c, r in self.species]
         return d
 
     @classmethod
@@ -441,6 +516,14 @@ class Scene:
             raise ValueError(f"box = {d['box']!r} and area_fraction = {d['area_fraction']!r} are both given: give "
                              "one of them (area_fraction makes a box of aspect 16:9 for the circles)")
         kw = dict(d)
+        if kw.get("species") is not None:
+            if "radius" in kw:
+                raise ValueError("radius and species are both given: the species give the radii; drop radius")
+            if "n" not in kw and isinstance(kw["species"], list) and all(
+                    isinstance(e, dict) and isinstance(e.get("count"), int) for e in kw["species"]):
+                kw["n"] = sum(e["count"] for e in kw["species"])
+            if isinstance(kw["species"], list):
+                kw["species"] = tuple(kw["species"])
         if kw.get("crystal") is not None and "n" not in kw and isinstance(kw["crystal"], (list, tuple)) \
                 and len(kw["crystal"]) == 2 and all(isinstance(v, int) for v in kw["crystal"]):
             kw["n"] = kw["crystal"][0] * kw["crystal"][1]

@@ -190,8 +190,8 @@ def scene_circles(scene):
     before any is placed."""
     rng = np.random.default_rng(scene.seed)
     n = scene.n
-    (rlo, rhi), (vlo, vhi) = scene.radius, scene.speed
-    radius = rng.uniform(rlo, rhi, n) if rhi > rlo else np.full(n, rlo)
+    vlo, vhi = scene.speed
+    radius = scene.radii(rng)
     speed = rng.uniform(vlo, vhi, n) if vhi > vlo else np.full(n, vlo)
     angle = rng.uniform(0.0, 2.0 * np.pi, n)
     vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)], axis=1)
