@@ -91,6 +91,9 @@ def _build_parser():
                      help="scene file: Scene fields (or [[circle]] tables listing the "
                           "circles) at top level, a [run] table for the run options")
     add_scene_flags(run)
+    run.add_argument("--from", dest="from_", metavar="FILE.gsd[:FRAME]",
+                     help="start from a frame of a GSD file (the last by default): one circles wrote, or HOOMD-blue's "
+                          "(circles.frames); --speed and --seed then draw the speeds a HOOMD file lacks")
     output = run.add_argument_group("run")
     output.add_argument("--duration", type=float, metavar="T",
                         help=f"simulated seconds (default {RUN_DEFAULTS['duration']:g})")
@@ -399,6 +402,47 @@ def _sized_scene_fields(fields, overrides, args):
     return merged
 
 
+#: What a scene file may give beside ``from``: what a frame leaves open.
+FRAME_KEYS = ("from", "speed", "seed", "mass", "scheme", "precision", "dt")
+
+
+def frame_source(args, fields):
+    """The GSD frame a run starts from: --from, or a scene file's ``from`` (a path from the
+    file's folder); None for a scene of its own."""
+    if getattr(args, "from_", None) is not None:
+        return args.from_
+    if args.scene and "from" in fields:
+        source = fields["from"]
+        if not isinstance(source, str):
+            raise UsageError(f"{args.scene}: from = {source!r} must be a string: \"FILE.gsd\" or \"FILE.gsd:FRAME\"")
+        return source if os.path.isabs(source) else os.path.join(os.path.dirname(args.scene) or ".", source)
+    return None
+
+
+def scene_from_frame(source, fields, args):
+    """The `CircleList` of the GSD frame `source`, with the speeds, seed, mass model, scheme,
+    precision and dt of the scene file's `fields` and the flags over them (`circles.frames`);
+    a flag or key that would shape another scene is refused."""
+    from .frames import circle_list_from_gsd
+    from .scene import Scene
+
+    where = f"{args.scene}: " if args.scene else ""
+    given = [f"--{key.replace('_', '-')}" for key in ("n", "radius", "area_fraction", "box", "crystal", "start",
+                                                     "species") if getattr(args, key, None) is not None]
+    given += [key for key in fields if key not in FRAME_KEYS]
+    if given:
+        raise UsageError(f"{where}{', '.join(given)} shape{'s' if len(given) == 1 else ''} a scene of its own, and the "
+                         f"run starts from {source}: drop {'it' if len(given) == 1 else 'them'}, or drop the frame")
+    values = {**{k: v for k, v in fields.items() if k != "from"}, **_scene_overrides(args)}
+    try:
+        speed = Scene(n=1, box=(1.0, 1.0), radius=0.1, speed=values.get("speed", Scene.speed)).speed
+        return circle_list_from_gsd(source, speed=speed, seed=values.get("seed", 0), mass=values.get("mass", "radius"),
+                                    scheme=values.get("scheme"), precision=values.get("precision"),
+                                    dt=values.get("dt"))
+    except (ValueError, TypeError) as error:
+        raise UsageError(f"{where}{error}") from None
+
+
 def random_scene(fields, args):
     """The `Scene` of a scene file's fields (or the showcase's) with the scene flags of `args`
     over them; a UsageError naming the file when it is refused."""
@@ -497,7 +541,10 @@ def _prepare(argv, made):
 
     fields, file_run = (_read_scene_file(args.scene) if args.scene
                         else (dict(SHOWCASE_SCENE), {}))
-    if args.scene and lists_circles(fields):
+    source = frame_source(args, fields)
+    if source is not None:
+        scene = scene_from_frame(source, fields if args.scene else {}, args)
+    elif args.scene and lists_circles(fields):
         scene = _circle_list(args.scene, fields, args)
     else:
         scene = random_scene(fields, args)

@@ -17,7 +17,8 @@ every radius grows in proportion, so the size ratios of a mixture stay as given
   perimeter over the area).
 - The end: `to` an area fraction, reached at the time the growth gives it; or "jammed", when
   Z passes `pressure_bound` (contacts then stand apart from gaps by about 1/Z of a diameter)
-  or when an interval no longer moves the area fraction (the growth has stalled).
+  or when an interval no longer moves the area fraction (the growth has stalled). A target
+  beyond the packing's jamming point ends the same way, below the target.
 
 The packing returned never overlaps: the radii at the end are trimmed to the closest pair's
 distance if round-off brought any pair closer than contact (by a few units in the last place).
@@ -317,9 +318,9 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         engine.v *= math.sqrt(kt0 / kt_end)
         if reached >= end and end == (left - 1.0) / g_now:
             stopped = "target" if to != "jammed" else "stalled"
-        elif to == "jammed" and z > pressure_bound:
+        elif z > pressure_bound:  # jammed, or (with a target) jammed before it
             stopped = "pressure"
-        elif to == "jammed" and step == 1.0:
+        elif step == 1.0:
             stopped = "stalled"
         elif most_events is not None and engine.totals[engine.growth.EVENTS] >= most_events:
             stopped = "events"
@@ -363,6 +364,8 @@ def _arguments(parser):
 
     parser.add_argument("scene", nargs="?", metavar="SCENE.toml", help="scene file: Scene fields at top level")
     add_scene_flags(parser)
+    parser.add_argument("--from", dest="from_", metavar="FILE.gsd[:FRAME]",
+                        help="compress the circles of a frame of a GSD file (circles.frames) in place of a scene")
     grow = parser.add_argument_group("compression")
     grow.add_argument("--to", required=True, metavar="PHI|jammed",
                       help="the area fraction to stop at, or jammed: until Z passes --pressure-bound")
@@ -379,15 +382,19 @@ def _arguments(parser):
 def _check(args, made):
     """(scene, target, out, stats) from the arguments, or a UsageError: everything checked
     before any disk moves."""
-    from .cli import SHOWCASE_SCENE, UsageError, _read_scene_file, random_scene
+    from .cli import SHOWCASE_SCENE, UsageError, _read_scene_file, frame_source, random_scene, scene_from_frame
     from .scenefile import lists_circles
     from .trajectory import check_path
 
     fields = _read_scene_file(args.scene)[0] if args.scene else dict(SHOWCASE_SCENE)
-    if args.scene and lists_circles(fields):
+    source = frame_source(args, fields)
+    if source is not None:
+        scene = scene_from_frame(source, fields if args.scene else {}, args)
+    elif args.scene and lists_circles(fields):
         raise UsageError(f"{args.scene} lists its circles ([[circle]] entries): circles compress grows a random "
-                         "scene; give n, radius and the other Scene fields")
-    scene = random_scene(fields, args)
+                         "scene or a GSD frame (--from); give n, radius and the other Scene fields")
+    else:
+        scene = random_scene(fields, args)
     if scene.scheme != "event":
         raise UsageError("--scheme discrete: compression needs the event scheme, whose times of impact account for "
                          "the growth; drop --scheme or give --scheme event")
@@ -398,7 +405,7 @@ def _check(args, made):
         if to == "jammed":
             check_jamming_rate(args.rate)
         else:
-            check_target(to, scene.expected_area_fraction_of(scene.n, scene.box, *scene.radius))
+            check_target(to, starting_fraction(scene))
         for flag, path in (("--out", args.out), ("--stats", args.stats)):
             if path is not None and os.path.isfile(path) and not args.force:
                 raise ValueError(f"{flag} {path} exists: give --force to overwrite it, or another name")
@@ -407,6 +414,13 @@ def _check(args, made):
     except ValueError as error:
         raise UsageError(str(error)) from None
     return scene, to, out, stats
+
+
+def starting_fraction(scene):
+    """The area fraction a scene (a `Scene`, on average) or a `CircleList` starts at."""
+    if hasattr(scene, "pos"):
+        return float(np.sum(np.pi * scene.radius ** 2)) / (scene.box[0] * scene.box[1])
+    return scene.area_fraction
 
 
 def write_packing(compression, out, run=None):
@@ -461,14 +475,24 @@ def main(argv):
         if not backend._state["initialized"]:
             backend.init("cpu")  # one thread carries the events; the CPU holds the state between intervals
         target = "jamming" if to == "jammed" else f"area fraction {to:g}"
+        from .cli import frame_source
         print(f"compress    {scene.n} circles in a {scene.boundary} box of {scene.box[0]:g} x {scene.box[1]:g}, to "
               f"{target} at rate {args.rate:g}", flush=True)
-        done = compress(scene, to, args.rate, pressure_bound=args.pressure_bound)
+        source = scene
+        if hasattr(scene, "pos"):  # a GSD frame's circles
+            from .simulation import Simulation
+            source = Simulation.from_arrays(scene.pos, scene.vel, scene.radius, scene.mass, box=scene.box,
+                                            boundary=scene.boundary, scheme="event", precision="f64",
+                                            color=scene.color)
+        done = compress(source, to, args.rate, pressure_bound=args.pressure_bound)
         why = {"target": "the target reached", "pressure": f"Z passed {args.pressure_bound:g}",
                "stalled": "the growth stalled"}[done.stopped]
+        if to != "jammed" and done.stopped != "target":
+            why = f"jammed below the target {to:g}: {why}"
         print(f"done        area fraction {done.area_fraction:.6f}, Z {done.compressibility:.4g} ({why}); "
               f"{done.events} events, {done.pair_collisions} pair collisions in {done.wall_s:.1f} s", flush=True)
-        run = {"compress": {"scene": scene.to_dict(), "to": to, "rate": args.rate,
+        made_of = {"from": frame_source(args, {})} if hasattr(scene, "pos") else {"scene": scene.to_dict()}
+        run = {"compress": {**made_of, "to": to, "rate": args.rate,
                             "pressure_bound": args.pressure_bound, "stopped": done.stopped,
                             "area_fraction": done.area_fraction, "compressibility": done.compressibility}}
         write_packing(done, out, run)
