@@ -519,7 +519,7 @@ class Scene:
         if kw.get("species") is not None:
             if "radius" in kw:
                 raise ValueError("radius and species are both given: the species give the radii; drop radius")
-            if "n" not in kw and isinstance(kw["species"], list) and all(
+            if "n" not in kw and isinstance(kw["species"], list) and kw["species"] and all(
                     isinstance(e, dict) and isinstance(e.get("count"), int) for e in kw["species"]):
                 kw["n"] = sum(e["count"] for e in kw["species"])
             if isinstance(kw["species"], list):

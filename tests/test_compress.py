@@ -180,3 +180,103 @@ def test_bad_input_is_refused_before_any_work(circles_cpu):
         compress.compress(scene, 0.2)
     with pytest.raises(ValueError, match=r"^compression needs the event scheme"):
         compress.compress(Scene(n=100, radius=0.5, area_fraction=0.3, scheme="discrete"), 0.5)
+
+
+# ---- the command line and species ------------------------------------------------------------
+
+def test_the_command_compresses_a_mixture_to_a_target_and_writes_the_packing_and_its_table(circles_cpu, tmp_path,
+                                                                                          capsys):
+    """`circles compress --species ... --to 0.7`: a GSD frame that read_simulation and gsd read
+    (the diameters of both species grown by one factor), a stats row per interval, and what
+    made it in log/circles/run."""
+    import csv
+
+    import gsd.hoomd
+
+    from circles import cli
+    from circles.trajectory import read_simulation, run_of
+
+    out, stats = tmp_path / "packed.gsd", tmp_path / "compress.csv"
+    args = ["compress", "--species", "100:0.5", "100:0.7", "--mass", "equal", "--boundary", "periodic",
+            "--area-fraction", "0.3", "--to", "0.7", "--out", str(out), "--stats", str(stats)]
+    assert cli.main(args) == 0
+    said = capsys.readouterr().out.splitlines()
+    assert said[0].startswith("compress    200 circles in a periodic box of ") and said[0].endswith(
+        "to area fraction 0.7 at rate 0.01")
+    assert said[1].startswith("done        area fraction 0.700000, Z ") and "(the target reached)" in said[1]
+    assert said[2] == f"wrote       {out}, {stats}"
+    sim = read_simulation(out)
+    radius = sim.state().radius
+    assert sorted(set(radius.round(12))) == pytest.approx([0.5 * radius.max() / 0.7, radius.max()], rel=1e-12)
+    assert np.sum(np.pi * radius ** 2) / (sim.box[0] * sim.box[1]) == pytest.approx(0.7, rel=1e-14)
+    with gsd.hoomd.open(str(out)) as f:
+        assert f[0].particles.N == 200
+    made = run_of(out)["compress"]
+    assert made["to"] == 0.7 and made["stopped"] == "target" and made["scene"]["species"][0] == {"count": 100,
+                                                                                                "radius": 0.5}
+    with open(stats, newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert list(rows[0]) == list(compress.COLUMNS)
+    fractions = [float(r["area_fraction"]) for r in rows]
+    assert fractions == sorted(fractions) and fractions[-1] == pytest.approx(0.7, rel=1e-12)
+    assert cli.main(args) == 2  # the files exist now
+    assert capsys.readouterr().err == f"circles: error: --out {out} exists: give --force to overwrite it, or another name\n"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--to", "0.5", "--rate", "0"], "--rate 0.0 must be a growth rate > 0 (the mean diameter's growth in thermal "
+                                     "speeds; 1e-3 slow, 0.1 fast)"),
+    (["--to", "jammed", "--rate", "0.05"], "--rate 0.05 with --to jammed: growth faster than 0.01 arrests the disks in "
+                                           "chains whose pressure diverges with no packing behind it; give --rate "
+                                           "0.01 or less"),
+    (["--to", "0.2"], "--to 0.2 is not above the scene's area fraction 0.3: compression only grows the disks; give a "
+                      "larger target, or a scene of a lower area fraction"),
+    (["--to", "0.91"], "--to 0.91 is above the densest packing of disks, pi/sqrt(12) = 0.906900: give a target at most "
+                       "that (a random packing jams near 0.82 to 0.84; use --to jammed)"),
+    (["--to", "dense"], "--to dense: give an area fraction such as 0.8, or jammed"),
+    (["--to", "0.5", "--scheme", "discrete"], "--scheme discrete: compression needs the event scheme, whose times of "
+                                              "impact account for the growth; drop --scheme or give --scheme event"),
+    (["--to", "0.5", "--pressure-bound", "10"], "pressure bound 10.0 must be a number >= 100 (a compressibility Z; 1e6 "
+                                                "by default)"),
+])
+def test_the_command_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys, args, message):
+    from circles import cli
+
+    out = tmp_path / "new" / "packed.gsd"
+    assert cli.main(["compress", "--n", "100", "--radius", "0.5", "--area-fraction", "0.3", "--out", str(out),
+                     *args]) == 2
+    assert capsys.readouterr().err == f"circles: error: {message}\n"
+    assert not (tmp_path / "new").exists()
+
+
+def test_species_give_each_count_its_radius_and_the_box_its_exact_area():
+    """Counts, or fractions of n (the last takes what rounding leaves); the area fraction of
+    the box is pi sum c r^2 / A exactly; a scene file's form and the round trip."""
+    scene = Scene.from_dict({"species": [{"count": 3, "radius": 0.5}, {"count": 1, "radius": 0.7}], "box": [10.0, 4.0]})
+    assert scene.n == 4 and scene.radius == (0.5, 0.7)
+    assert scene.area_fraction == pytest.approx(math.pi * (3 * 0.25 + 0.49) / 40.0, rel=1e-15)
+    assert scene.radii(None).tolist() == [0.5, 0.5, 0.5, 0.7]
+    assert Scene.from_dict(scene.to_dict()) == scene
+    mixed = Scene(n=11, species=[{"fraction": 0.5, "radius": 0.5}, {"fraction": 0.5, "radius": 0.7}],
+                  area_fraction=0.4)
+    assert mixed.species == ((6, 0.5), (5, 0.7))  # round(5.5) = 6 (to even), the rest 5
+    assert mixed.area_fraction == pytest.approx(0.4, rel=1e-12)
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"n": 5, "species": [{"count": 2, "radius": 1.0}]}, "n = 5 but the species count 2 = 2 circles: give n = 2, or "
+                                                          "leave n out"),
+    ({"species": [{"count": 2, "radius": 1.0}], "radius": 0.3}, "radius and species are both given: the species give "
+                                                                "the radii; drop radius"),
+    ({"n": 4, "species": [{"count": 2, "radius": 1.0}, {"fraction": 0.5, "radius": 1.0}]},
+     "species mix counts and fractions: give every species a count, or every one a fraction"),
+    ({"n": 4, "species": [{"fraction": 0.6, "radius": 1.0}, {"fraction": 0.6, "radius": 1.0}]},
+     "species fractions [0.6, 0.6] must each be between 0 and 1 and sum to 1"),
+    ({"species": [{"count": 2, "radius": -1.0}]}, "species[0] radius = -1.0 must be > 0"),
+    ({"species": []}, "species = () must be a non-empty list of {count = C, radius = R} or {fraction = F, "
+                      "radius = R} entries"),
+])
+def test_bad_species_are_refused_in_one_line(fields, message):
+    with pytest.raises(ValueError) as refused:
+        Scene.from_dict(fields)
+    assert str(refused.value) == message
