@@ -73,8 +73,6 @@ def _predict(i, now, x: arr2, v: arr2, tau: arr1, r0: arr1, count: arr1, ev_t: a
     w, h, g = params[0], params[1], params[2]
     ncx, ncy = ti.cast(params[3], ti.i32), ti.cast(params[4], ti.i32)
     cw, ch = params[5], params[6]
-    xi = ti.Vector([x[i, 0], x[i, 1]])
-    vi = ti.Vector([v[i, 0], v[i, 1]])
     scale = 1.0 + g * now
     best = ti.cast(NEVER, ti.f64)
     partner = NOTHING
@@ -98,11 +96,11 @@ def _predict(i, now, x: arr2, v: arr2, tau: arr1, r0: arr1, count: arr1, ev_t: a
                 j = head[ky * ncx + kx]
                 while j >= 0:
                     if j != i:
-                        xj = ti.Vector([x[j, 0], x[j, 1]]) + ti.Vector([v[j, 0], v[j, 1]]) * (now - tau[j])
-                        d = xj - xi
-                        d[0] = _wrap(d[0], w, periodic)
-                        d[1] = _wrap(d[1], h, periodic)
-                        dv = ti.Vector([v[j, 0], v[j, 1]]) - vi
+                        # Vectors made here, in the loop, never at the function's top level (tests/test_gpu_rules.py).
+                        ahead = now - tau[j]
+                        d = ti.Vector([_wrap(x[j, 0] + v[j, 0] * ahead - x[i, 0], w, periodic),
+                                       _wrap(x[j, 1] + v[j, 1] * ahead - x[i, 1], h, periodic)])
+                        dv = ti.Vector([v[j, 0] - v[i, 0], v[j, 1] - v[i, 1]])
                         s0 = r0[i] + r0[j]
                         t = _pair_time(d, dv, s0 * scale, s0 * g)
                         if t < best or (t == best and j < partner):
@@ -114,24 +112,24 @@ def _predict(i, now, x: arr2, v: arr2, tau: arr1, r0: arr1, count: arr1, ev_t: a
         # A wall: the gap x - r closes at rg - v.
         for k in ti.static(range(2)):
             side = w if k == 0 else h
-            if vi[k] - rg < 0.0:
-                t = ti.max((xi[k] - r) / (rg - vi[k]), 0.0)
+            if v[i, k] - rg < 0.0:
+                t = ti.max((x[i, k] - r) / (rg - v[i, k]), 0.0)
                 if t < best:
                     best, partner = t, WALL_LEFT if k == 0 else WALL_BOTTOM
-            if -vi[k] - rg < 0.0:
-                t = ti.max((side - xi[k] - r) / (rg + vi[k]), 0.0)
+            if -v[i, k] - rg < 0.0:
+                t = ti.max((side - x[i, k] - r) / (rg + v[i, k]), 0.0)
                 if t < best:
                     best, partner = t, WALL_RIGHT if k == 0 else WALL_TOP
     # The side of its cell.
     for k in ti.static(range(2)):
         size = cw if k == 0 else ch
         lower = (cx if k == 0 else cy) * size
-        if vi[k] > 0.0:
-            t = ti.max((lower + size - xi[k]) / vi[k], 0.0)
+        if v[i, k] > 0.0:
+            t = ti.max((lower + size - x[i, k]) / v[i, k], 0.0)
             if t < best:
                 best, partner = t, CELL_RIGHT if k == 0 else CELL_UP
-        elif vi[k] < 0.0:
-            t = ti.max((lower - xi[k]) / vi[k], 0.0)
+        elif v[i, k] < 0.0:
+            t = ti.max((lower - x[i, k]) / v[i, k], 0.0)
             if t < best:
                 best, partner = t, CELL_LEFT if k == 0 else CELL_DOWN
     ev_t[i] = now + best
