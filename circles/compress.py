@@ -360,7 +360,7 @@ def _target(text):
 
 
 def _arguments(parser):
-    from .cli import add_scene_flags
+    from .sceneflags import add_scene_flags
 
     parser.add_argument("scene", nargs="?", metavar="SCENE.toml", help="scene file: Scene fields at top level")
     add_scene_flags(parser)
@@ -382,11 +382,12 @@ def _arguments(parser):
 def _check(args, made):
     """(scene, target, out, stats) from the arguments, or a UsageError: everything checked
     before any disk moves."""
-    from .cli import SHOWCASE_SCENE, UsageError, _read_scene_file, frame_source, random_scene, scene_from_frame
+    from .command import UsageError
+    from .sceneflags import SHOWCASE_SCENE, frame_source, random_scene, read_scene_file, scene_from_frame
     from .scenefile import lists_circles
     from .trajectory import check_path
 
-    fields = _read_scene_file(args.scene)[0] if args.scene else dict(SHOWCASE_SCENE)
+    fields = read_scene_file(args.scene)[0] if args.scene else dict(SHOWCASE_SCENE)
     source = frame_source(args, fields)
     if source is not None:
         scene = scene_from_frame(source, fields if args.scene else {}, args)
@@ -475,7 +476,7 @@ def main(argv):
         if not backend._state["initialized"]:
             backend.init("cpu")  # one thread carries the events; the CPU holds the state between intervals
         target = "jamming" if to == "jammed" else f"area fraction {to:g}"
-        from .cli import frame_source
+        from .sceneflags import frame_source
         print(f"compress    {scene.n} circles in a {scene.boundary} box of {scene.box[0]:g} x {scene.box[1]:g}, to "
               f"{target} at rate {args.rate:g}", flush=True)
         source = scene

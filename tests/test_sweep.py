@@ -278,7 +278,8 @@ def test_bad_sweep_files_are_refused_before_any_task(tmp_path, capsys, change, w
 
 OBSERVABLE_NAMES = ("compressibility, collision_rate, energy_change, pressure, wall_pressure, temperature, "
                     "reduced_pressure, hexatic_order")
-SCENE_KEYS = "n, box, radius, speed, mass, boundary, scheme, precision, dt, seed, area_fraction, crystal, start"
+SCENE_KEYS = ("n, box, radius, speed, mass, boundary, scheme, precision, dt, seed, area_fraction, crystal, start, "
+              "species")
 SWEEP_KEYS = "repeats, equilibrate, measure, blocks, observables, checkpoint_every"
 OUT_OF_RANGE = "is out of range: give simulated seconds"
 FRACTION = "0.1, 0.3, 0.5]"
@@ -286,7 +287,7 @@ FRACTION = "0.1, 0.3, 0.5]"
 
 @pytest.mark.parametrize("old, new, message", [
     ("[vary]\n", "[vary]\ncolour = [1, 2]\n", "[vary] unknown key colour: vary one of the Scene fields n, box, radius, "
-     "speed, mass, boundary, scheme, precision, dt, area_fraction, crystal, start"),
+     "speed, mass, boundary, scheme, precision, dt, area_fraction, crystal, start, species"),
     (FRACTION, "]", "[vary] area_fraction = [] must be a non-empty list of values, e.g. area_fraction = [a, b]"),
     ("[" + FRACTION, "0.3", "[vary] area_fraction = 0.3 must be a non-empty list of values, e.g. area_fraction = "
      "[a, b]"),

@@ -1,0 +1,144 @@
+"""Compression to jamming and to a density, measured: the numbers of the docs' Compression page.
+
+    python bench/compress_packings.py [--large] [--out FILE.md]
+
+- Jamming: the 50:50 mixture of diameters 1 and 1.4 (equal masses, periodic box), from area
+  fraction 0.3 at rate 0.01 until Z > 1e6, several seeds at N = 256 and 1024: the jamming
+  fraction, the disks left once rattlers (fewer than 3 contacts) are taken away, their mean
+  contact number (gaps below 1e-4 of the contact distance) against the isostatic 4 - 2/N', the
+  events and the wall time.
+- The free-volume law: each N = 256 packing with every radius shrunk by 1 - delta, run at
+  fixed radii (the growth engine with no growth) for 200 collisions a disk: Z (1 - phi/phi_J),
+  which tends to 2 (the dimension) near jamming.
+- Crystallisation: 256 equal disks compressed slowly (rate 1e-3) to area fraction 0.80: the
+  global hexatic order and the mean of the local |psi_6|.
+- With --large, the speed: 1e5 bidisperse disks from 0.3 to jamming, and 1e6 to 0.80.
+"""
+import argparse
+import math
+import sys
+import time
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+from bench import cpu_model  # noqa: E402
+
+
+def mixture(n, seed):
+    from circles.scene import Scene
+
+    return Scene(species=[{"count": n // 2, "radius": 0.5}, {"count": n - n // 2, "radius": 0.7}], n=n,
+                 area_fraction=0.3, boundary="periodic", mass="equal", speed=1.0, seed=seed)
+
+
+def contacts(sim, tolerance=1e-4):
+    """(mean contacts per disk, disks) once rattlers are taken away, one after another."""
+    from scipy.spatial import cKDTree
+
+    state = sim.state()
+    pos, r, box = state.pos, state.radius, np.asarray(sim.box)
+    tree = cKDTree(pos % box, boxsize=box)
+    pairs = tree.query_pairs(2 * r.max() * (1 + tolerance), output_type="ndarray")
+    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
+    d -= box * np.round(d / box)
+    touching = pairs[np.hypot(d[:, 0], d[:, 1]) / (r[pairs[:, 0]] + r[pairs[:, 1]]) - 1 < tolerance]
+    alive = np.ones(len(r), bool)
+    while True:
+        kept = touching[alive[touching[:, 0]] & alive[touching[:, 1]]]
+        count = np.bincount(kept.ravel(), minlength=len(r))
+        rattlers = alive & (count < 3)
+        if not rattlers.any():
+            return 2 * len(kept) / alive.sum(), int(alive.sum())
+        alive &= ~rattlers
+
+
+def free_volume(done, delta, collisions=200):
+    """Z (1 - phi/phi_J) of the packing of `done` with radii shrunk by 1 - delta, at fixed radii."""
+    from circles import compress, growth
+
+    state = done.simulation.state()
+    box = tuple(done.simulation.box)
+    radius = state.radius * (1 - delta)
+    engine = compress._Engine(state.pos, state.vel, radius, state.mass, box, True)
+    n = len(radius)
+    kt = float(np.sum(state.mass * np.sum(state.vel ** 2, axis=1))) / (2 * (n - 1))
+    engine.layout(0.0, 0.0, 1.0)
+    engine.run(math.inf, 20 * n)  # settle
+    engine.synchronise(float(engine.totals[growth.TIME]))
+    start, virial = float(engine.totals[growth.TIME]), float(engine.totals[growth.VIRIAL])
+    engine.tau[:] = start
+    engine.layout(start, 0.0, 1.0)
+    engine.run(math.inf, collisions * n)
+    span = float(engine.totals[growth.TIME]) - start
+    z = 1 + (float(engine.totals[growth.VIRIAL]) - virial) / (2 * span * n * kt)
+    phi = float(np.sum(np.pi * radius ** 2)) / (box[0] * box[1])
+    return phi, z, z * (1 - phi / done.area_fraction)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--large", action="store_true", help="also 1e5 to jamming and 1e6 to 0.80")
+    parser.add_argument("--out", default=str(ROOT / "outputs" / "bench" / "amd-epyc" / "compress.md"))
+    args = parser.parse_args()
+    import circles
+    from circles import compress
+    from circles.order import hexatic_order, psi6
+    from circles.scene import Scene
+
+    circles.init("cpu")
+    compress.compress(mixture(64, 0), 0.5)  # the kernels compiled before any timing
+    lines = [f"# Compression: jamming, the free-volume law, crystallisation ({cpu_model()}, one thread, "
+             f"{date.today()})", "", "Made by `python bench/compress_packings.py" + (" --large" if args.large else "")
+             + "`.", "", "## Jamming of the 50:50 mixture of diameters 1 and 1.4 (rate 0.01, Z > 1e6)", "",
+             "| N | seed | phi_J | Z | disks kept (no rattlers) | contacts a disk | isostatic 4 - 2/N' | events | wall s |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    packings = []
+    for n, seeds in ((256, range(1, 6)), (1024, range(1, 4))):
+        for seed in seeds:
+            done = compress.compress(mixture(n, seed), "jammed", rate=0.01)
+            z, kept = contacts(done.simulation)
+            lines.append(f"| {n} | {seed} | {done.area_fraction:.4f} | {done.compressibility:.3g} | {kept} | {z:.3f} | "
+                         f"{4 - 2 / kept:.3f} | {done.events} | {done.wall_s:.1f} |")
+            print(lines[-1], flush=True)
+            if n == 256:
+                packings.append(done)
+    fractions = [float(line.split("|")[3]) for line in lines if line.startswith("| 256 ")]
+    lines += ["", f"N = 256: phi_J {np.mean(fractions):.4f} +- {np.std(fractions, ddof=1):.4f} (mean and spread of "
+                  f"{len(fractions)} seeds). O'Hern et al. (2003): 0.842 for large N.", "",
+              "## The free-volume law near jamming (N = 256, radii shrunk by 1 - delta, 200 collisions a disk)", "",
+              "| seed | delta | phi | Z | Z (1 - phi/phi_J) |", "|---|---|---|---|---|"]
+    for seed, done in enumerate(packings, 1):
+        for delta in (1e-3, 1e-4):
+            phi, z, law = free_volume(done, delta)
+            lines.append(f"| {seed} | {delta:g} | {phi:.6f} | {z:.4g} | {law:.3f} |")
+            print(lines[-1], flush=True)
+    lines += ["", "## Equal disks compressed slowly (N = 256, rate 1e-3, to 0.80)", "",
+              "| seed | hexatic order abs(psi_6) | mean local abs(psi_6) | events | wall s |", "|---|---|---|---|---|"]
+    for seed in (1, 2):
+        scene = Scene(n=256, radius=0.5, area_fraction=0.3, boundary="periodic", mass="equal", speed=1.0, seed=seed)
+        done = compress.compress(scene, 0.80, rate=1e-3)
+        local = psi6(done.simulation.state().pos, done.simulation.box, True)
+        lines.append(f"| {seed} | {hexatic_order(local):.3f} | {np.mean(np.abs(local)):.3f} | {done.events} | "
+                     f"{done.wall_s:.1f} |")
+        print(lines[-1], flush=True)
+    if args.large:
+        lines += ["", "## Speed (one thread)", "", "| N | from | to | rate | phi reached | events | events/s | wall s |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for n, to in ((100_000, "jammed"), (1_000_000, 0.80)):
+            tick = time.perf_counter()
+            done = compress.compress(mixture(n, 1), to, rate=0.01)
+            wall = time.perf_counter() - tick
+            lines.append(f"| {n:.0e} | 0.3 | {to} | 0.01 | {done.area_fraction:.4f} | {done.events} | "
+                         f"{done.events / done.wall_s:.3g} | {wall:.0f} |")
+            print(lines[-1], flush=True)
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
