@@ -890,3 +890,24 @@ def test_results_csv_cut_short_by_a_stop_loses_only_its_last_line(serial, tmp_pa
     unnamed = sweeps.sweep_from_dict(tomllib_loads(TINY))
     with pytest.raises(sweeps.SweepError, match=r"differ from this one's\): give another --out, or remove"):
         sweeps.read_results(copy, unnamed)
+
+
+def test_a_sweep_file_takes_species_in_its_scene_and_varies_them(circles_cpu, tmp_path):
+    """[scene] species, and species in [vary]: each point's scene holds its mixture, and a task
+    runs it (its rows keep the temperature, which every point measures)."""
+    from circles.scene import Scene
+
+    text = ('[scene]\nspecies = [{count = 20, radius = 0.05}, {count = 20, radius = 0.07}]\nboundary = "periodic"\n'
+            'speed = [1.0, 1.0]\nmass = "equal"\n\n[vary]\narea_fraction = [0.2, 0.3]\n\n'
+            '[sweep]\nequilibrate = 0.2\nmeasure = 0.5\nblocks = 2\n')
+    sweep = sweeps.read_sweep(write(tmp_path, text))
+    scene = Scene.from_dict(sweep.point_scene(1, 0))
+    assert scene.species == ((20, 0.05), (20, 0.07)) and scene.area_fraction == pytest.approx(0.3, rel=1e-12)
+    varied = text.replace("area_fraction = [0.2, 0.3]", "species = [[{count = 40, radius = 0.05}], "
+                          "[{count = 20, radius = 0.05}, {count = 20, radius = 0.07}]]").replace(
+        "[scene]\nspecies = [{count = 20, radius = 0.05}, {count = 20, radius = 0.07}]\n", "[scene]\nbox = [1.0, 1.0]\n")
+    sweep = sweeps.read_sweep(write(tmp_path, varied))
+    assert [Scene.from_dict(sweep.point_scene(k, 0)).n for k in range(2)] == [40, 40]
+    assert Scene.from_dict(sweep.point_scene(1, 0)).radius == (0.05, 0.07)
+    run = sweeps.run_sweep(sweep, tmp_path / "out")
+    assert len(run.rows) == 2 and all(float(row["temperature"]) > 0 for row in run.rows)
