@@ -13,6 +13,7 @@ import os
 import signal
 import textwrap
 
+import numpy as np
 import pytest
 
 from circles import sweep as sweeps
@@ -911,3 +912,52 @@ def test_a_sweep_file_takes_species_in_its_scene_and_varies_them(circles_cpu, tm
     assert Scene.from_dict(sweep.point_scene(1, 0)).radius == (0.05, 0.07)
     run = sweeps.run_sweep(sweep, tmp_path / "out")
     assert len(run.rows) == 2 and all(float(row["temperature"]) > 0 for row in run.rows)
+
+
+def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circles_cpu):
+    """run_task's blocks against a Simulation of the same scene advanced to the same instants,
+    each value written out here from its definition: in a walled box P = (N kT + virial / 2t)
+    / ((W - 2r)(H - 2r)) and the walls' impulse over t (2 (W - 2r) + 2 (H - 2r)), r the mean
+    radius; kT = K / N; the energy change over the first kinetic energy. In a periodic box,
+    |psi_6| at each block's end from freud."""
+    import freud
+
+    from circles.scene import Scene
+    from circles.simulation import Simulation
+
+    fields = {"n": 60, "radius": [0.1, 0.2], "box": [6.0, 4.0], "speed": [1.0, 1.0], "mass": "area",
+              "boundary": "walls", "seed": 2}
+    result = sweeps.run_task(fields, 0.5, 2.0, 2, kept=("pressure", "wall_pressure", "temperature"))
+    sim = Simulation(Scene.from_dict(fields))
+    e0 = sim.stats()["kinetic_energy"]
+    sim.advance(0.5)
+    before = sim.stats()
+    r = 0.5 * (0.1 + 0.2)
+    w, h = 6.0 - 2 * r, 4.0 - 2 * r
+    for block, end in enumerate((1.5, 2.5)):
+        sim.advance(end - sim.time)
+        after = sim.stats()
+        t = after["time"] - before["time"]
+        kt = after["kinetic_energy"] / 60
+        p = (60 * kt + (after["virial"] - before["virial"]) / (2 * t)) / (w * h)
+        wall = (after["wall_impulse"] - before["wall_impulse"]) / (t * 2 * (w + h))
+        assert result["blocks"]["pressure"][block] == pytest.approx(p, rel=1e-12)
+        assert result["blocks"]["wall_pressure"][block] == pytest.approx(wall, rel=1e-12)
+        assert result["blocks"]["temperature"][block] == pytest.approx(kt, rel=1e-12)
+        assert result["blocks"]["energy_change"][block] == pytest.approx(
+            (after["kinetic_energy"] - before["kinetic_energy"]) / e0, rel=1e-9, abs=1e-15)
+        before = after
+
+    fields = {"n": 200, "radius": 0.1, "area_fraction": 0.6, "speed": [1.0, 1.0], "mass": "equal",
+              "boundary": "periodic", "seed": 2}
+    result = sweeps.run_task(fields, 0.0, 1.0, 2, kept=("hexatic_order",))
+    sim = Simulation(Scene.from_dict(fields))
+    box = freud.box.Box.from_box([sim.box[0], sim.box[1]], dimensions=2)
+    for block, end in enumerate((0.5, 1.0)):
+        sim.advance(end - sim.time)
+        pos = np.zeros((200, 3))
+        pos[:, :2] = sim.state().pos - np.asarray(sim.box) / 2
+        hexatic = freud.order.Hexatic(k=6)
+        hexatic.compute((box, pos), neighbors={"num_neighbors": 6, "exclude_ii": True})
+        assert result["blocks"]["hexatic_order"][block] == pytest.approx(abs(np.mean(hexatic.particle_order)),
+                                                                         abs=1e-6)
