@@ -38,27 +38,6 @@ def mixture(n, seed):
                  area_fraction=0.3, boundary="periodic", mass="equal", speed=1.0, seed=seed)
 
 
-def contacts(sim, tolerance=1e-4):
-    """(mean contacts per disk, disks) once rattlers are taken away, one after another."""
-    from scipy.spatial import cKDTree
-
-    state = sim.state()
-    pos, r, box = state.pos, state.radius, np.asarray(sim.box)
-    tree = cKDTree(pos % box, boxsize=box)
-    pairs = tree.query_pairs(2 * r.max() * (1 + tolerance), output_type="ndarray")
-    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
-    d -= box * np.round(d / box)
-    touching = pairs[np.hypot(d[:, 0], d[:, 1]) / (r[pairs[:, 0]] + r[pairs[:, 1]]) - 1 < tolerance]
-    alive = np.ones(len(r), bool)
-    while True:
-        kept = touching[alive[touching[:, 0]] & alive[touching[:, 1]]]
-        count = np.bincount(kept.ravel(), minlength=len(r))
-        rattlers = alive & (count < 3)
-        if not rattlers.any():
-            return 2 * len(kept) / alive.sum(), int(alive.sum())
-        alive &= ~rattlers
-
-
 def free_volume(done, delta, collisions=200):
     """Z (1 - phi/phi_J) of the packing of `done` with radii shrunk by 1 - delta, at fixed radii."""
     from circles import compress, growth
@@ -120,7 +99,7 @@ def main():
     for n, seeds in ((256, range(1, 6)), (1024, range(1, 4))):
         for seed in seeds:
             done = compress.compress(mixture(n, seed), "jammed", rate=0.01)
-            z, kept = contacts(done.simulation)
+            z, kept = compress.contact_number(done.simulation)
             lines.append(f"| {n} | {seed} | {done.area_fraction:.4f} | {done.compressibility:.3g} | {kept} | {z:.3f} | "
                          f"{4 - 2 / kept:.3f} | {done.events} | {done.wall_s:.1f} |")
             print(lines[-1], flush=True)

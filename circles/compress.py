@@ -220,6 +220,35 @@ def largest_scale(pos, r0, box, periodic):
     return scale
 
 
+def contact_number(simulation, tolerance=1e-4):
+    """(mean contacts a disk, disks kept) of a packing once its rattlers are taken away: pairs
+    whose gap is below `tolerance` of their contact distance are contacts, and disks with fewer
+    than 3 (which a jammed packing does not hold in place) go, one round after another, until
+    none is left. A jammed packing of frictionless disks in a periodic box is isostatic:
+    2 (N' - 1) + 1 contacts among its N' disks, a mean of 4 - 2/N'."""
+    from scipy.spatial import cKDTree
+
+    state = simulation.state()
+    pos, r, box = state.pos, state.radius, np.asarray(simulation.box, np.float64)
+    periodic = simulation.boundary == "periodic"
+    tree = cKDTree(pos % box, boxsize=box) if periodic else cKDTree(pos)
+    pairs = tree.query_pairs(2 * r.max() * (1 + tolerance), output_type="ndarray")
+    if not len(pairs):
+        return 0.0, 0
+    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
+    if periodic:
+        d -= box * np.round(d / box)
+    touching = pairs[np.hypot(d[:, 0], d[:, 1]) / (r[pairs[:, 0]] + r[pairs[:, 1]]) - 1 < tolerance]
+    alive = np.ones(len(r), bool)
+    while True:
+        kept = touching[alive[touching[:, 0]] & alive[touching[:, 1]]]
+        count = np.bincount(kept.ravel(), minlength=len(r))
+        rattlers = alive & (count < 3)
+        if not rattlers.any():
+            return (2 * len(kept) / alive.sum() if alive.any() else 0.0), int(alive.sum())
+        alive &= ~rattlers
+
+
 def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=None, most_events=None):
     """Grow the disks of `source` (a `Scene` of the event scheme, or a `Simulation`) until the
     area fraction `to`, or until they jam (`to="jammed"`), at growth rate `rate`; returns a

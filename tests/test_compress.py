@@ -115,28 +115,6 @@ def bidisperse(n, fraction, seed, boundary="periodic"):
                                   box=(side, side), boundary=boundary)
 
 
-def contacts(sim, tolerance):
-    """(mean contacts per disk, disks) once rattlers (fewer than 3 contacts) are taken away, one
-    after another: contacts are pairs whose gap is below `tolerance` of their contact distance."""
-    from scipy.spatial import cKDTree
-
-    state = sim.state()
-    pos, r, box = state.pos, state.radius, np.asarray(sim.box)
-    tree = cKDTree(pos % box, boxsize=box)
-    pairs = tree.query_pairs(2 * r.max() * (1 + tolerance), output_type="ndarray")
-    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
-    d -= box * np.round(d / box)
-    touching = pairs[np.hypot(d[:, 0], d[:, 1]) / (r[pairs[:, 0]] + r[pairs[:, 1]]) - 1 < tolerance]
-    alive = np.ones(len(r), bool)
-    while True:
-        kept = touching[alive[touching[:, 0]] & alive[touching[:, 1]]]
-        count = np.bincount(kept.ravel(), minlength=len(r))
-        rattlers = alive & (count < 3)
-        if not rattlers.any():
-            return 2 * len(kept) / alive.sum(), int(alive.sum())
-        alive &= ~rattlers
-
-
 @pytest.mark.parametrize("boundary", ["periodic", "walls"])
 def test_compression_stops_at_the_target_with_no_overlap_ever(circles_cpu, boundary):
     """To 0.75 from 0.3: the packing's area fraction is the target to round-off, no pair of the
@@ -164,7 +142,7 @@ def test_a_bidisperse_mixture_jams_near_0_842_with_four_contacts_a_disk(circles_
     done = compress.compress(bidisperse(256, 0.3, 1), "jammed", rate=0.01)
     assert done.stopped == "pressure" and done.compressibility > 1e6
     assert done.area_fraction == pytest.approx(0.842, abs=0.01)
-    z, kept = contacts(done.simulation, 1e-4)
+    z, kept = compress.contact_number(done.simulation, 1e-4)
     assert kept > 0.85 * 256
     assert z == pytest.approx(4 - 2 / kept, abs=0.05)
 
@@ -290,7 +268,7 @@ def test_near_jamming_the_pressure_follows_the_free_volume_law(circles_cpu):
     kept) to O(delta). Five packings measured within 0.07 of it (docs: Compression); the
     pressure of 200 collisions a disk is good to about 2%."""
     done = compress.compress(bidisperse(256, 0.3, 1), "jammed", rate=0.01)
-    _, kept = contacts(done.simulation, 1e-4)
+    _, kept = compress.contact_number(done.simulation, 1e-4)
     state = done.simulation.state()
     radius = state.radius * (1 - 1e-4)
     e = engine(state.pos, state.vel, radius, tuple(done.simulation.box), True, mass=state.mass)
@@ -316,3 +294,17 @@ def test_equal_disks_compressed_slowly_crystallise(circles_cpu):
     done = compress.compress(scene, 0.80, rate=1e-3)
     local = psi6(done.simulation.state().pos, done.simulation.box, True)
     assert hexatic_order(local) > 0.8 and np.mean(np.abs(local)) > 0.85
+
+
+def test_the_contact_number_counts_six_in_a_close_packed_crystal_and_takes_rattlers_away(circles_cpu):
+    """A triangular crystal at close packing: six contacts each, none a rattler. With the
+    radii 1% short and a tolerance of 1e-4 no pair touches, and every disk goes as a rattler."""
+    from circles.placement.lattice import crystal_positions
+    from circles.simulation import Simulation
+
+    box = (6.0, 6 * math.sqrt(3) / 2)  # 6 columns, 6 rows of disks of diameter 1
+    pos = crystal_positions(6, 6, box)
+    touching = Simulation.from_arrays(pos, np.zeros((36, 2)), 0.5 * (1 - 1e-12), box=box, boundary="periodic")
+    assert compress.contact_number(touching, 1e-4) == (6.0, 36)
+    apart = Simulation.from_arrays(pos, np.zeros((36, 2)), 0.495, box=box, boundary="periodic")
+    assert compress.contact_number(apart, 1e-4) == (0.0, 0)
