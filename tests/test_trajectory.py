@@ -377,3 +377,84 @@ def test_unwrapped_takes_the_full_precision_box_where_the_frame_has_it(circles_c
     box = np.array([3.1, 2.3])
     assert np.abs(image).max() > 0
     np.testing.assert_array_equal(unwrapped(frame), sim.state().pos - 0.5 * box + image * box)
+
+
+#: The chunks of a frame, with the type and shape each has (n circles, k types of width w):
+#: HOOMD's schema (https://gsd.readthedocs.io, "HOOMD Schema") and circles' own log chunks.
+FIRST_FRAME_ONLY = {"configuration/box": ("float32", (6,)), "configuration/dimensions": ("uint8", (1,)),
+                    "particles/N": ("uint32", (1,)), "particles/types": ("int8", ("k", "w")),
+                    "particles/typeid": ("uint32", ("n",)), "particles/diameter": ("float32", ("n",)),
+                    "particles/mass": ("float32", ("n",)), "log/particles/circles/radius": ("float64", ("n",)),
+                    "log/particles/circles/mass": ("float64", ("n",)),
+                    "log/particles/circles/color": ("uint8", ("n", 3))}
+EVERY_FRAME = {"configuration/step": ("uint64", (1,)), "particles/position": ("float32", ("n", 3)),
+               "particles/velocity": ("float32", ("n", 3)), "log/circles/box": ("float64", (2,)),
+               "log/circles/dt": ("float64", (1,)), "log/circles/time": ("float64", (1,)),
+               "log/circles/precision_bits": ("uint8", (1,)), "log/circles/totals": ("float64", (4,)),
+               "log/particles/circles/position": ("float64", ("n", 2)),
+               "log/particles/circles/velocity": ("float64", ("n", 2)),
+               "log/particles/circles/pair_count": ("int32", ("n",)),
+               "log/particles/circles/virial": ("float64", ("n",))}
+
+
+@pytest.mark.parametrize("boundary", ["periodic", "walls"])
+def test_every_chunk_has_the_schemas_type_and_shape_and_the_values_of_the_state(circles_cpu, tmp_path, boundary):
+    """Each chunk of the first two frames, read raw with gsd.fl: its type and shape as the
+    schemas fix them, no chunk beyond them, and the values a reader takes from it: the box,
+    2 dimensions, the step count, N, the type names, the totals and the run's JSON with sorted
+    keys."""
+    import json
+
+    import gsd.fl
+
+    from circles import Scene, Simulation
+
+    sim = Simulation(Scene(n=30, radius=[0.1, 0.2], box=(4.0, 3.0), boundary=boundary, seed=2))
+    path = tmp_path / "t.gsd"
+    run = {"z": 1, "a": [2, 3]}
+    writer = GSDWriter(path, run=run, order=True)
+    before = sim.stats()
+    writer.write(sim)
+    sim.advance(0.3)
+    after = sim.stats()
+    steps = sim.steps
+    writer.write(sim, observables.interval(before, after, 30, sim.box, boundary, 0.15), after)
+    sim.advance(0.1)
+    writer.write(sim, observables.interval(after, sim.stats(), 30, sim.box, boundary, 0.15))  # its totals taken now
+    writer.close()
+    walls = {"log/particles/circles/wall_count": ("int32", ("n",)),
+             "log/particles/circles/wall_impulse": ("float64", ("n",))} if boundary == "walls" else {}
+    image = {"particles/image": ("int32", ("n", 3))} if boundary == "periodic" else {}
+    first = {**FIRST_FRAME_ONLY, "log/circles/boundary": ("uint8", (len(boundary),)),
+             "log/circles/scheme": ("uint8", (5,)), "log/circles/run": ("uint8", ("j",)),
+             "log/circles/hexatic_order": ("float64", (1,)), "log/particles/circles/psi6": ("float64", ("n", 2))}
+    sizes = {"n": 30, "k": 1, "w": 2, "j": len(json.dumps(run, sort_keys=True))}  # 30 radii: one type, "A"
+    rows = {f"log/circles/{name}": ("float64", (1,)) for name in observables.COLUMNS}
+    with gsd.fl.open(str(path), "r") as f:
+        names = set(f.find_matching_chunk_names(""))
+        for frame, expected in ((0, {**first, **EVERY_FRAME, **walls, **image, **rows}),
+                                (1, {**EVERY_FRAME, **walls, **image, **rows,
+                                     "log/circles/hexatic_order": ("float64", (1,)),
+                                     "log/particles/circles/psi6": ("float64", ("n", 2)),
+                                     "log/circles/boundary": ("uint8", (len(boundary),)),
+                                     "log/circles/scheme": ("uint8", (5,))})):
+            held = {name for name in names if f.chunk_exists(frame, name)}
+            assert held == set(expected), (frame, sorted(held ^ set(expected)))
+            for name, (dtype, shape) in expected.items():
+                data = f.read_chunk(frame, name)
+                assert str(data.dtype) == dtype, (frame, name)
+                assert data.shape == tuple(sizes.get(s, s) for s in shape), (frame, name)
+        assert f.read_chunk(0, "configuration/box").tolist() == [4.0, 3.0, 0, 0, 0, 0]
+        assert f.read_chunk(0, "configuration/dimensions").tolist() == [2]
+        assert f.read_chunk(0, "particles/N").tolist() == [30]
+        assert f.read_chunk(1, "configuration/step").tolist() == [steps] and steps > 0
+        assert f.read_chunk(0, "particles/types").view("S2").ravel().tolist() == [b"A"]
+        assert f.read_chunk(1, "log/circles/precision_bits").tolist() == [64]
+        assert f.read_chunk(1, "log/circles/totals").tolist() == [after["pair_collisions"], after["wall_collisions"],
+                                                                  after["virial"], after["wall_impulse"]]
+        assert bytes(f.read_chunk(0, "log/circles/run")).decode() == json.dumps(run, sort_keys=True)
+        final = sim.stats()
+        assert f.read_chunk(2, "log/circles/totals").tolist() == [final["pair_collisions"], final["wall_collisions"],
+                                                                  final["virial"], final["wall_impulse"]]
+        assert f.read_chunk(1, "log/circles/dt").tolist() == [sim.dt]
+        assert f.read_chunk(1, "log/circles/box").tolist() == [4.0, 3.0]
