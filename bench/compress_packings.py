@@ -1,7 +1,7 @@
 """Compression to jamming and to a density, measured: the numbers of the docs' Compression page.
 
     python bench/compress_packings.py [--out FILE.md]
-    python bench/compress_packings.py --speed [--out FILE.md]
+    python bench/compress_packings.py --speed N [--out FILE.md]
 
 - Jamming: the 50:50 mixture of diameters 1 and 1.4 (equal masses, periodic box), from area
   fraction 0.3 at rate 0.01 until Z > 1e6, several seeds at N = 256 and 1024: the jamming
@@ -13,8 +13,8 @@
   which tends to 2 (the dimension) near jamming.
 - Crystallisation: 256 equal disks compressed slowly (rate 1e-3) to area fraction 0.80: the
   global hexatic order and the mean of the local |psi_6|.
-- With --speed, only the speed (to compress_speed.md): 1e5 disks of the mixture from 0.3 to
-  jamming, and 1e6 to 0.80, at rate 0.01.
+- With --speed N, only the speed (to compress_speed_N.md): N disks of the mixture from 0.3 at
+  rate 0.01, to jamming for N = 1e5 (or below), to 0.80 above.
 """
 import argparse
 import math
@@ -63,12 +63,13 @@ def free_volume(done, delta, collisions=200):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--speed", action="store_true", help="only the speed: 1e5 to jamming and 1e6 to 0.80")
+    parser.add_argument("--speed", type=float, metavar="N", help="only the speed of N disks: to jamming up to 1e5, "
+                                                                  "to 0.80 above")
     parser.add_argument("--out", help="the table (default outputs/bench/amd-epyc/compress.md, or compress_speed.md "
                                       "with --speed)")
     args = parser.parse_args()
     folder = ROOT / "outputs" / "bench" / "amd-epyc"
-    args.out = args.out or str(folder / ("compress_speed.md" if args.speed else "compress.md"))
+    args.out = args.out or str(folder / (f"compress_speed_{args.speed:.0e}.md" if args.speed else "compress.md"))
     import circles
     from circles import compress
     from circles.order import hexatic_order, psi6
@@ -78,10 +79,11 @@ def main():
     compress.compress(mixture(64, 0), 0.5)  # the kernels compiled before any timing
     if args.speed:
         lines = [f"# Compression: speed ({cpu_model()}, one thread, {date.today()})", "",
-                 "Made by `python bench/compress_packings.py --speed`: the 50:50 mixture of diameters 1 and 1.4, "
+                 f"Made by `python bench/compress_packings.py --speed {args.speed:.0e}`: the 50:50 mixture of diameters 1 and 1.4, "
                  "periodic box, rate 0.01.", "",
                  "| N | from | to | phi reached | Z | events | events/s | wall s |", "|---|---|---|---|---|---|---|---|"]
-        for n, to in ((100_000, "jammed"), (1_000_000, 0.80)):
+        n = int(args.speed)
+        for to in ("jammed" if n <= 100_000 else 0.80,):
             tick = time.perf_counter()
             done = compress.compress(mixture(n, 1), to, rate=0.01)
             wall = time.perf_counter() - tick

@@ -180,3 +180,47 @@ def test_order_needs_somewhere_to_go(capsys):
 
     assert cli.main(["run", "--n", "20", "--order", "--out", "none"]) == 2
     assert "--order" in capsys.readouterr().err
+
+
+def test_the_crystal_is_where_its_docstring_puts_it():
+    """Circle (i, j) at x = (i + 1/4 + (j mod 2)/2) W/nx, y = (j + 1/2) H/ny, row by row."""
+    from circles.placement.lattice import crystal_positions
+
+    pos = crystal_positions(2, 2, (4.0, 2.0))
+    assert pos.tolist() == [[0.5, 0.5], [2.5, 0.5], [1.5, 1.5], [3.5, 1.5]]
+
+
+def test_hexatic_colours_are_the_hsv_colours_of_the_orientation_and_the_order():
+    """Hue arg(psi_6) / 2 pi, value 0.25 + 0.75 |psi_6| (at most 1), full saturation: the
+    standard library's HSV to RGB, rounded to bytes."""
+    import colorsys
+
+    local = np.array([0.9 * np.exp(1j * a) for a in np.linspace(-np.pi, np.pi, 37)] + [1.5 + 0j, 0.2j, -0.3 + 0j])
+    expected = []
+    for z in local:
+        hue = (np.angle(z) / (2 * np.pi)) % 1.0
+        rgb = colorsys.hsv_to_rgb(hue, 1.0, 0.25 + 0.75 * min(abs(z), 1.0))
+        expected.append([round(255 * c) for c in rgb])
+    got = order.hexatic_colors(local).astype(int)
+    assert np.max(np.abs(got - np.array(expected))) <= 1  # rounding of the last byte only
+    assert np.mean(got == np.array(expected)) > 0.95
+
+
+def test_the_orientation_is_the_hexagons_angle_in_its_sixty_degrees():
+    for angle in (0.0, 0.3, 0.9, 1.0):
+        assert order.orientation(np.array([np.exp(6j * angle)]))[0] == pytest.approx(angle % (np.pi / 3), abs=1e-12)
+    assert order.orientation(np.array([np.exp(6j * -0.2)]))[0] == pytest.approx(np.pi / 3 - 0.2, abs=1e-12)
+
+
+def test_a_centre_just_below_zero_is_wrapped_onto_the_box_not_onto_its_far_side():
+    """np.mod(-1e-300, W) rounds to W itself, outside [0, W): psi_6 puts such a centre at 0, so
+    the crystal's values are those of the same crystal with the centre at 0."""
+    from circles.placement.lattice import crystal_positions
+
+    box = (6.0, 6 * np.sqrt(3) / 2)
+    pos = crystal_positions(6, 6, box)
+    pos -= pos[0]  # circle 0 at the corner, (0, 0)
+    nudged = pos.copy()
+    nudged[0] = [-1e-300, -1e-300]
+    assert np.array_equal(order.psi6(nudged, box, True), order.psi6(pos, box, True))
+    assert np.allclose(np.abs(order.psi6(pos, box, True)), 1.0)

@@ -142,8 +142,9 @@ def hexagonal_shrunk(radius: np.ndarray, box, periodic: bool, rng: np.random.Gen
 
 def crystal_positions(nx, ny, box):
     """The centres of a perfect triangular crystal of nx columns and ny rows (ny even) filling a
-    periodic box of aspect nx : ny sqrt(3)/2: rows ny / H apart, every other row shifted by half
-    a spacing, in row order."""
+    periodic box of aspect nx : ny sqrt(3)/2, in row order: circle (i, j) at
+    x = (i + 1/4 + (j mod 2)/2) W/nx and y = (j + 1/2) H/ny, so every other row is shifted by
+    half a spacing and no centre lies on a side of the box."""
     w, h = float(box[0]), float(box[1])
     a, b = w / nx, h / ny
     i, j = np.meshgrid(np.arange(nx), np.arange(ny))
