@@ -160,6 +160,25 @@ def test_pieces_cut_the_equilibration_only_with_checkpoints():
     assert sweeps.pieces(3.0, 6.0, 3, every=1.4) == [(1.4, None), (2.8, None), (3.0, None), (5.0, 0), (7.0, 1),
                                                      (9.0, 2)]
     assert sweeps.pieces(0.0, 2.0, 2, every=1.0) == [(1.0, 0), (2.0, 1)]
+    assert sweeps.pieces(2.0, 1.0, 1, every=1.0) == [(1.0, None), (2.0, None), (3.0, 0)]  # no piece twice
+    assert sweeps.pieces(0.5, 1.0, 2) == [(0.5, None), (1.0, 0), (1.5, 1)]
+
+
+def test_a_task_outside_a_worker_starts_taichi_on_the_cpu_with_the_threads_asked_for(circles_cpu):
+    """Where no runtime is running: the threads given (at least one), or every core outside a
+    Dask worker; a runtime already running is kept."""
+    import taichi as ti
+
+    from circles import backend
+
+    for threads, want in ((None, os.cpu_count() or 1), (3, 3), (0, 1)):
+        backend._state["initialized"] = False
+        sweeps._ensure_runtime(threads)
+        assert backend._state["arch"] == "cpu"
+        assert ti.lang.impl.current_cfg().cpu_max_num_threads == want
+    runtime = backend._state["runtime"]
+    sweeps._ensure_runtime(5)
+    assert backend._state["runtime"] == runtime
 
 
 def test_a_task_that_died_goes_on_from_its_checkpoint_with_the_same_result(circles_cpu, tmp_path, monkeypatch):
