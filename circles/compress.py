@@ -8,9 +8,10 @@ every radius grows in proportion, so the size ratios of a mixture stay as given
 - The rate: the mean diameter grows by `rate` thermal speeds sqrt(kT/m) per unit time (m the
   mean mass, kT the temperature at the start). Slow rates (1e-3 and below) let the fluid
   follow in equilibrium and crystallise equal disks; fast ones (0.1 and above) quench a glass.
-- The temperature: growth pumps energy in; every interval of 10 collisions a circle, the
-  speeds are scaled back to the starting kT. A periodic box starts with zero total momentum,
-  which collisions keep.
+- The temperature: growth pumps energy in; after every interval of 10 events a circle (0.1 /
+  rate at rates above 0.01, at least 1, since fast growth heats faster) the speeds are scaled
+  back to the starting kT. A periodic box starts with zero total momentum, which collisions
+  keep.
 - The pressure: over each interval, Z = PA / (NkT) = 1 + virial / (2 t N kT), the virial the
   sum of (r_i + r_j) |J| over pair collisions (`circles.observables`), kT the mean of the
   interval's first and last (in a walled box the walls' part is left out: it is of order the
@@ -34,8 +35,8 @@ import numpy as np
 
 #: The densest packing of equal disks, pi / sqrt(12): no target may pass it.
 DENSEST = math.pi / math.sqrt(12.0)
-#: Collisions per circle between two rescalings of the speeds.
-INTERVAL_COLLISIONS = 10
+#: Events per circle between two rescalings of the speeds (fewer at fast rates: `compress`).
+INTERVAL_EVENTS = 10
 #: The default bound on Z for a jammed packing, and the largest growth rate.
 PRESSURE_BOUND = 1e6
 MOST_RATE = 10.0
@@ -249,11 +250,10 @@ def contact_number(simulation, tolerance=1e-4):
         alive &= ~rattlers
 
 
-def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=None, most_events=None):
+def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=None):
     """Grow the disks of `source` (a `Scene` of the event scheme, or a `Simulation`) until the
     area fraction `to`, or until they jam (`to="jammed"`), at growth rate `rate`; returns a
-    `Compression`. `on_row(row)` is called with each interval's stats row as it comes.
-    `most_events` stops after that many events (a bound for tests and trials), as "events"."""
+    `Compression`. `on_row(row)` is called with each interval's stats row as it comes."""
     from . import placement
     from .backend import ensure_init
     from .observables import temperature
@@ -309,7 +309,7 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
     stopped = None
     z = math.nan
     pairs_before = 0
-    per_interval = int(n * min(INTERVAL_COLLISIONS, max(1.0, 0.1 / rate)))
+    per_interval = int(n * min(INTERVAL_EVENTS, max(1.0, 0.1 / rate)))
     while stopped is None:
         # Each interval starts afresh from the radii reached, on a clock of its own: the speeds
         # were rescaled, so every event is predicted again.
@@ -318,11 +318,8 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         cell_scale = min(left, CELL_GROWTH)
         engine.layout(0.0, g_now, cell_scale)
         end = min((left - 1.0) / g_now, (cell_scale - 1.0) / g_now)
-        most = per_interval
-        if most_events is not None:
-            most = min(most, most_events - int(engine.totals[engine.growth.EVENTS]))
         virial_before = float(engine.totals[engine.growth.VIRIAL])
-        reached = engine.run(end, most)
+        reached = engine.run(end, per_interval)
         engine.synchronise(reached)
         kt_end = kt(engine.v)
         step = 1.0 + g_now * reached
@@ -351,8 +348,6 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
             stopped = "pressure"
         elif step == 1.0:
             stopped = "stalled"
-        elif most_events is not None and engine.totals[engine.growth.EVENTS] >= most_events:
-            stopped = "events"
     scale = final_scale if stopped == "target" else grown
     while stopped == "target" and float(np.sum(np.pi * (radius * scale) ** 2)) / area > to:
         scale = math.nextafter(scale, 0.0)  # the target, not a unit in the last place above it
