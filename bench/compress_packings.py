@@ -69,7 +69,8 @@ def main():
                                       "with --speed)")
     args = parser.parse_args()
     folder = ROOT / "outputs" / "bench" / "amd-epyc"
-    args.out = args.out or str(folder / (f"compress_speed_{args.speed:.0e}.md" if args.speed else "compress.md"))
+    size = f"1e{round(math.log10(args.speed))}" if args.speed else None  # 1e5, 1e6
+    args.out = args.out or str(folder / (f"compress_speed_{size}.md" if args.speed else "compress.md"))
     import circles
     from circles import compress
     from circles.order import hexatic_order, psi6
@@ -79,7 +80,7 @@ def main():
     compress.compress(mixture(64, 0), 0.5)  # the kernels compiled before any timing
     if args.speed:
         lines = [f"# Compression: speed ({cpu_model()}, one thread, {date.today()})", "",
-                 f"Made by `python bench/compress_packings.py --speed {args.speed:.0e}`: the 50:50 mixture of diameters 1 and 1.4, "
+                 f"Made by `python bench/compress_packings.py --speed {size}`: the 50:50 mixture of diameters 1 and 1.4, "
                  "periodic box, rate 0.01.", "",
                  "| N | from | to | phi reached | Z | events | events/s | wall s |", "|---|---|---|---|---|---|---|---|"]
         n = int(args.speed)
