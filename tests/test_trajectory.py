@@ -458,3 +458,23 @@ def test_every_chunk_has_the_schemas_type_and_shape_and_the_values_of_the_state(
                                                                   final["virial"], final["wall_impulse"]]
         assert f.read_chunk(1, "log/circles/dt").tolist() == [sim.dt]
         assert f.read_chunk(1, "log/circles/box").tolist() == [4.0, 3.0]
+
+
+def test_the_writer_counts_its_frames_and_the_time_it_spends(circles_cpu, tmp_path, monkeypatch):
+    """frames, seconds and cpu_seconds add up over writes: a clock that moves 1 s at each
+    reading makes each write last 1 s of each."""
+    import itertools
+    import time
+
+    from circles import Scene, Simulation
+
+    sim = Simulation(Scene(n=20, radius=0.1, box=(3.0, 3.0), seed=1))
+    writer = GSDWriter(tmp_path / "t.gsd")
+    ticks, cpu = itertools.count(0.0), itertools.count(0.0)
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(ticks)))
+    monkeypatch.setattr(time, "process_time", lambda: float(next(cpu)))
+    for _ in range(3):
+        writer.write(sim)
+    monkeypatch.undo()
+    writer.close()
+    assert writer.frames == 3 and writer.seconds == 3.0 and writer.cpu_seconds == 3.0
