@@ -379,7 +379,12 @@ class Scene:
             raise ValueError(f"n = {self.n} must be > 0")
         rlo, rhi = check_pair_range("radius", self.radius, lambda v: v > 0)
         if self.species is not None:
-            species = _species(self.species, self.n)
+            # Counts fix n: Scene(species=...) without n takes their sum, as a scene file does.
+            counts_only = isinstance(self.species, (list, tuple)) and all(
+                isinstance(e, dict) and "count" in e or isinstance(e, (list, tuple)) for e in self.species)
+            given_n = None if counts_only and self.n == Scene.n else self.n
+            species = _species(self.species, given_n)
+            object.__setattr__(self, "n", sum(c for c, _ in species))
             radii = (min(r for _, r in species), max(r for _, r in species))
             if (rlo, rhi) not in (radii, (0.02, 0.05)):
                 raise ValueError(f"radius = {self.radius!r} and species are both given: the species give the radii; "
