@@ -236,6 +236,7 @@ def test_species_give_each_count_its_radius_and_the_box_its_exact_area():
     assert scene.area_fraction == pytest.approx(math.pi * (3 * 0.25 + 0.49) / 40.0, rel=1e-15)
     assert scene.radii(None).tolist() == [0.5, 0.5, 0.5, 0.7]
     assert Scene.from_dict(scene.to_dict()) == scene
+    assert Scene(species=[{"count": 3, "radius": 0.5}, {"count": 1, "radius": 0.7}], box=(10.0, 4.0)) == scene
     mixed = Scene(n=11, species=[{"fraction": 0.5, "radius": 0.5}, {"fraction": 0.5, "radius": 0.7}],
                   area_fraction=0.4)
     assert mixed.species == ((6, 0.5), (5, 0.7))  # round(5.5) = 6 (to even), the rest 5
