@@ -45,10 +45,10 @@ def circle_list_from_gsd(spec, *, speed=(0.5, 1.0), seed=0, mass="radius", schem
 
     from .inputs import random_colors
     from .scene import Scene, check_dt
-    from .scenefile import CircleList, _check_inside
+    from .scenefile import CircleList, _check_inside, first_overlap
 
     path, frame = split_spec(spec)
-    if path.lower().endswith(".gsd") is False:
+    if not path.lower().endswith(".gsd"):
         raise ValueError(f"--from {spec}: give a GSD file, FILE.gsd or FILE.gsd:FRAME")
     if not os.path.isfile(path):
         raise ValueError(f"--from {spec}: {path} does not exist")
@@ -99,7 +99,7 @@ def circle_list_from_gsd(spec, *, speed=(0.5, 1.0), seed=0, mass="radius", schem
         _check_inside(pos, radius, box_t, boundary, 0.0)
     except ValueError as error:
         raise ValueError(f"--from {spec}: frame {index}: {error}") from None
-    pair = first_overlap(pos, radius, box_t)
+    pair = first_overlap(pos, radius, box_t, boundary)
     if pair is not None:
         i, j, distance = pair
         contact = radius[i] + radius[j]
@@ -108,29 +108,6 @@ def circle_list_from_gsd(spec, *, speed=(0.5, 1.0), seed=0, mass="radius", schem
                          "be apart or touching")
     return CircleList(pos=pos, vel=vel, radius=radius, mass=masses, color=random_colors(n, np.random.default_rng(0)),
                       box=box_t, boundary=boundary, scheme=scheme, precision=precision, dt=check_dt(dt))
-
-
-def first_overlap(pos, radius, box):
-    """(i, j, distance) of the overlapping pair of a periodic box with the lowest i, then j,
-    beyond `inputs.INPUT_OVERLAP_TOLERANCE` of the contact distance; None when none overlap."""
-    from scipy.spatial import cKDTree
-
-    from .inputs import INPUT_OVERLAP_TOLERANCE
-
-    size = np.asarray(box, np.float64)
-    tree = cKDTree(np.mod(pos, size) % size, boxsize=size)
-    pairs = tree.query_pairs(2.0 * float(radius.max()), output_type="ndarray")
-    if not len(pairs):
-        return None
-    d = pos[pairs[:, 1]] - pos[pairs[:, 0]]
-    d -= size * np.round(d / size)
-    distance = np.hypot(d[:, 0], d[:, 1])
-    contact = radius[pairs[:, 0]] + radius[pairs[:, 1]]
-    bad = np.flatnonzero((contact - distance) / contact > INPUT_OVERLAP_TOLERANCE)
-    if not len(bad):
-        return None
-    k = bad[np.lexsort((pairs[bad, 1], pairs[bad, 0]))[0]]
-    return int(pairs[k, 0]), int(pairs[k, 1]), float(distance[k])
 
 
 def _own(log, snap, scheme, precision, dt):

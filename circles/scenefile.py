@@ -234,7 +234,20 @@ def _check_inside(pos, radius, box, boundary, slack):
 
 
 def _check_no_overlap(pos, radius, box, boundary):
-    """Refuse the first overlapping pair (lowest i, then j) beyond from_arrays' tolerance.
+    """Refuse the first overlapping pair (lowest i, then j) beyond from_arrays' tolerance."""
+    pair = first_overlap(pos, radius, box, boundary)
+    if pair is not None:
+        i, j, distance = pair
+        contact = float(radius[i] + radius[j])
+        raise ValueError(f"{_circle_name(i)} and circle {j} overlap: their centres are "
+                         f"{distance:.6g} apart, less than the sum of their radii {contact:.6g}: "
+                         "move them apart (touching is allowed)")
+
+
+def first_overlap(pos, radius, box, boundary):
+    """(i, j, distance of the centres) of the overlapping pair with the lowest i, then j, beyond
+    from_arrays' tolerance (`inputs.INPUT_OVERLAP_TOLERANCE` of the contact distance); None
+    when no pair overlaps.
 
     Sweep along x: circles sorted by x are compared with the k-th next one, k = 1, 2, ...,
     until every such gap in x exceeds the largest contact distance. On a torus the sweep
@@ -267,13 +280,10 @@ def _check_no_overlap(pos, radius, box, boundary):
         for m in np.flatnonzero(overlap > INPUT_OVERLAP_TOLERANCE):
             i, j = sorted((int(order[a[m]]), int(order[b[m]])))
             bad.append((i, j))
-    if bad:
-        i, j = min(bad)
-        distance = float(np.hypot(*_image(pos[j] - pos[i], box, periodic)))
-        contact = float(radius[i] + radius[j])
-        raise ValueError(f"{_circle_name(i)} and circle {j} overlap: their centres are "
-                         f"{distance:.6g} apart, less than the sum of their radii {contact:.6g}: "
-                         "move them apart (touching is allowed)")
+    if not bad:
+        return None
+    i, j = min(bad)
+    return i, j, float(np.hypot(*_image(pos[j] - pos[i], box, periodic)))
 
 
 def _image(d, box, periodic):
