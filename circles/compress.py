@@ -257,7 +257,7 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
     from . import placement
     from .backend import ensure_init
     from .observables import temperature
-    from .scene import Scene
+    from .scene import Scene, area_fraction
     from .simulation import Simulation
 
     ensure_init()
@@ -281,8 +281,7 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
     radius = np.asarray(radius, np.float64)
     mass = np.asarray(mass, np.float64)
     periodic = boundary == "periodic"
-    area = float(box[0]) * float(box[1])
-    start_fraction = float(np.sum(np.pi * radius ** 2)) / area
+    start_fraction = area_fraction(radius, box)
     to = check_target(to, start_fraction)
     if to == "jammed":
         check_jamming_rate(rate)
@@ -349,13 +348,13 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         elif step == 1.0:
             stopped = "stalled"
     scale = final_scale if stopped == "target" else grown
-    while stopped == "target" and float(np.sum(np.pi * (radius * scale) ** 2)) / area > to:
+    while stopped == "target" and area_fraction(radius * scale, box) > to:
         scale = math.nextafter(scale, 0.0)  # the target, not a unit in the last place above it
     radii = radius * scale
     radii *= min(1.0, largest_scale(engine.x, radii, box, periodic))
     sim = Simulation.from_arrays(engine.x, engine.v, radii, mass, box=box, boundary=boundary, scheme="event",
                                  precision="f64", color=color)
-    return Compression(simulation=sim, area_fraction=float(np.sum(np.pi * radii ** 2)) / area, compressibility=z,
+    return Compression(simulation=sim, area_fraction=area_fraction(radii, box), compressibility=z,
                        stopped=stopped, events=int(engine.totals[engine.growth.EVENTS]),
                        pair_collisions=int(engine.totals[engine.growth.PAIRS]), time=elapsed,
                        wall_s=time.perf_counter() - started, rows=rows)
@@ -444,7 +443,9 @@ def _check(args, made):
 def starting_fraction(scene):
     """The area fraction a scene (a `Scene`, on average) or a `CircleList` starts at."""
     if hasattr(scene, "pos"):
-        return float(np.sum(np.pi * scene.radius ** 2)) / (scene.box[0] * scene.box[1])
+        from .scene import area_fraction
+
+        return area_fraction(scene.radius, scene.box)
     return scene.area_fraction
 
 
