@@ -27,7 +27,6 @@ distance if round-off brought any pair closer than contact (by a few units in th
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -430,11 +429,9 @@ def _check(args, made):
             check_jamming_rate(args.rate)
         else:
             check_target(to, starting_fraction(scene))
-        for flag, path in (("--out", args.out), ("--stats", args.stats)):
-            if path is not None and os.path.isfile(path) and not args.force:
-                raise ValueError(f"{flag} {path} exists: give --force to overwrite it, or another name")
-        out = check_path(args.out, True, ".gsd", "--out", made)
-        stats = None if args.stats is None else check_path(args.stats, True, ".csv", "--stats", made)
+        out = check_path(args.out, args.force, ".gsd", "--out", made, resumable=False)
+        stats = None if args.stats is None else check_path(args.stats, args.force, ".csv", "--stats", made,
+                                                           resumable=False)
     except ValueError as error:
         raise UsageError(str(error)) from None
     return scene, to, out, stats

@@ -130,10 +130,11 @@ def _text(value):
     return np.frombuffer(value.encode(), np.uint8).copy()
 
 
-def check_path(path, force=False, suffix=".gsd", what="--trajectory", made=None):
+def check_path(path, force=False, suffix=".gsd", what="--trajectory", made=None, resumable=True):
     """Raise ValueError unless a data file can be written at `path`: the suffix, a writable
-    folder, and no file there unless `force`. Missing folders are made and listed in `made`
-    (deepest last), as `video.check_writable` does; no file is created."""
+    folder, and no file there unless `force` (the refusal names --resume where the command has
+    it: `resumable`). Missing folders are made and listed in `made` (deepest last), as
+    `video.check_writable` does; no file is created."""
     path = Path(path)
     if path.suffix.lower() != suffix:
         raise ValueError(f"{what} {path}: the file name must end in {suffix}, e.g. run{suffix}")
@@ -141,8 +142,8 @@ def check_path(path, force=False, suffix=".gsd", what="--trajectory", made=None)
         raise ValueError(f"{what} {path} is a folder: give a file's path, such as {path / ('run' + suffix)}")
     make_folder(path.parent, f"{what} {path}", made)
     if path.exists() and not force:
-        raise ValueError(f"{what} {path} exists: give --force to overwrite it, --resume to continue its run, or another "
-                         "name")
+        resume = " --resume to continue its run," if resumable else ""
+        raise ValueError(f"{what} {path} exists: give --force to overwrite it,{resume} or another name")
     return path
 
 
