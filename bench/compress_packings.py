@@ -1,20 +1,21 @@
 """Compression to jamming and to a density, measured: the numbers of the docs' Compression page.
 
     python bench/compress_packings.py [--out FILE.md]
-    python bench/compress_packings.py --speed N [--out FILE.md]
+    python bench/compress_packings.py --speed N [--rate R] [--out FILE.md]
 
 - Jamming: the 50:50 mixture of diameters 1 and 1.4 (equal masses, periodic box), from area
-  fraction 0.3 at rate 0.01 until Z > 1e6, several seeds at N = 256 and 1024: the jamming
-  fraction, the disks left once rattlers (fewer than 3 contacts) are taken away, their mean
-  contact number (gaps below 1e-4 of the contact distance) against the isostatic 4 - 2/N', the
-  events and the wall time.
-- The free-volume law: each N = 256 packing with every radius shrunk by 1 - delta, run at
-  fixed radii (the growth engine with no growth) for 200 collisions a disk: Z (1 - phi/phi_J),
-  which tends to 2 (the dimension) near jamming.
+  fraction 0.3 until Z > 1e6, at rates 0.01 (fast) and 0.001 (the default to jamming), several
+  seeds at N = 256 and 1024: the jamming fraction, the disks left once rattlers (fewer than 3
+  contacts) are taken away, their mean contact number (gaps below 1e-4 of the contact
+  distance) against the isostatic 4 - 2/N', the events and the wall time.
+- The free-volume law: each N = 256 packing of the default rate with every radius shrunk by
+  1 - delta, run at fixed radii (the growth engine with no growth) for 200 collisions a disk:
+  Z (1 - phi/phi_J), which tends to 2 (the dimension) near jamming.
 - Crystallisation: 256 equal disks compressed slowly (rate 1e-3) to area fraction 0.80: the
   global hexatic order and the mean of the local |psi_6|.
-- With --speed N, only the speed (to compress_speed_N.md): N disks of the mixture from 0.3 at
-  rate 0.01, to jamming for N = 1e5 (or below), to 0.80 above.
+- With --speed N, only the speed (to compress_speed_N.md, or _rR.md with --rate): N disks of
+  the mixture from 0.3, to jamming for N = 1e5 (or below), to 0.80 above, at the command's
+  default rate or R.
 """
 import argparse
 import math
@@ -65,12 +66,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--speed", type=float, metavar="N", help="only the speed of N disks: to jamming up to 1e5, "
                                                                   "to 0.80 above")
+    parser.add_argument("--rate", type=float, help="with --speed: the growth rate (default: the command's)")
     parser.add_argument("--out", help="the table (default outputs/bench/amd-epyc/compress.md, or compress_speed.md "
                                       "with --speed)")
     args = parser.parse_args()
     folder = ROOT / "outputs" / "bench" / "amd-epyc"
     size = f"1e{round(math.log10(args.speed))}" if args.speed else None  # 1e5, 1e6
-    args.out = args.out or str(folder / (f"compress_speed_{size}.md" if args.speed else "compress.md"))
+    tail = f"_r{args.rate:g}" if args.rate else ""
+    args.out = args.out or str(folder / (f"compress_speed_{size}{tail}.md" if args.speed else "compress.md"))
     import circles
     from circles import compress
     from circles.order import hexatic_order, psi6
@@ -80,38 +83,49 @@ def main():
     compress.compress(mixture(64, 0), 0.5)  # the kernels compiled before any timing
     if args.speed:
         lines = [f"# Compression: speed ({cpu_model()}, one thread, {date.today()})", "",
-                 f"Made by `python bench/compress_packings.py --speed {size}`: the 50:50 mixture of diameters 1 and 1.4, "
-                 "periodic box, rate 0.01.", "",
-                 "| N | from | to | phi reached | Z | events | events/s | wall s |", "|---|---|---|---|---|---|---|---|"]
+                 f"Made by `python bench/compress_packings.py --speed {size}"
+                 f"{f' --rate {args.rate:g}' if args.rate else ''}`: the 50:50 mixture of diameters 1 and 1.4, "
+                 "periodic box.", "",
+                 "| N | from | to | rate | phi reached | Z | contacts a disk (isostatic) | events | events/s | wall s |",
+                 "|---|---|---|---|---|---|---|---|---|---|"]
         n = int(args.speed)
         for to in ("jammed" if n <= 100_000 else 0.80,):
+            rate = args.rate or compress.default_rate(to)
             tick = time.perf_counter()
-            done = compress.compress(mixture(n, 1), to, rate=0.01)
+            done = compress.compress(mixture(n, 1), to, rate=rate)
             wall = time.perf_counter() - tick
-            lines.append(f"| {n:.0e} | 0.3 | {to} | {done.area_fraction:.4f} | {done.compressibility:.3g} | "
-                         f"{done.events} | {done.events / done.wall_s:.3g} | {wall:.0f} |")
+            contacts = "-"
+            if to == "jammed":
+                z, kept = compress.contact_number(done.simulation)
+                contacts = f"{z:.3f} ({4 - 2 / kept:.3f})"
+            lines.append(f"| {n:.0e} | 0.3 | {to} | {rate:g} | {done.area_fraction:.4f} | {done.compressibility:.3g} | "
+                         f"{contacts} | {done.events} | {done.events / done.wall_s:.3g} | {wall:.0f} |")
             print(lines[-1], flush=True)
         Path(args.out).write_text("\n".join(lines) + "\n")
         print(f"wrote {args.out}")
         return
     lines = [f"# Compression: jamming, the free-volume law, crystallisation ({cpu_model()}, one thread, "
-             f"{date.today()})", "", "Made by `python bench/compress_packings.py`.", "", "## Jamming of the 50:50 mixture of diameters 1 and 1.4 (rate 0.01, Z > 1e6)", "",
-             "| N | seed | phi_J | Z | disks kept (no rattlers) | contacts a disk | isostatic 4 - 2/N' | events | wall s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"{date.today()})", "", "Made by `python bench/compress_packings.py`.", "", "## Jamming of the 50:50 mixture of diameters 1 and 1.4 (Z > 1e6)", "",
+             "| rate | N | seed | phi_J | Z | disks kept (no rattlers) | contacts a disk | isostatic 4 - 2/N' | events | "
+             "wall s |", "|---|---|---|---|---|---|---|---|---|---|"]
     packings = []
-    for n, seeds in ((256, range(1, 6)), (1024, range(1, 4))):
-        for seed in seeds:
-            done = compress.compress(mixture(n, seed), "jammed", rate=0.01)
-            z, kept = compress.contact_number(done.simulation)
-            lines.append(f"| {n} | {seed} | {done.area_fraction:.4f} | {done.compressibility:.3g} | {kept} | {z:.3f} | "
-                         f"{4 - 2 / kept:.3f} | {done.events} | {done.wall_s:.1f} |")
-            print(lines[-1], flush=True)
-            if n == 256:
-                packings.append(done)
-    fractions = [float(line.split("|")[3]) for line in lines if line.startswith("| 256 ")]
-    lines += ["", f"N = 256: phi_J {np.mean(fractions):.4f} +- {np.std(fractions, ddof=1):.4f} (mean and spread of "
-                  f"{len(fractions)} seeds). O'Hern et al. (2003): 0.842 for large N.", "",
-              "## The free-volume law near jamming (N = 256, radii shrunk by 1 - delta, 200 collisions a disk)", "",
+    for rate in (0.01, compress.JAMMING_RATE):
+        fractions = []
+        for n, seeds in ((256, range(1, 6)), (1024, range(1, 4))):
+            for seed in seeds:
+                done = compress.compress(mixture(n, seed), "jammed", rate=rate)
+                z, kept = compress.contact_number(done.simulation)
+                lines.append(f"| {rate:g} | {n} | {seed} | {done.area_fraction:.4f} | {done.compressibility:.3g} | "
+                             f"{kept} | {z:.3f} | {4 - 2 / kept:.3f} | {done.events} | {done.wall_s:.1f} |")
+                print(lines[-1], flush=True)
+                if n == 256:
+                    fractions.append(done.area_fraction)
+                    if rate == compress.JAMMING_RATE:
+                        packings.append(done)
+        lines.append(f"| {rate:g} | 256 | mean and spread | {np.mean(fractions):.4f} +- {np.std(fractions, ddof=1):.4f} "
+                     "| | | | | | |")
+    lines += ["", "O'Hern et al. (2003): 0.842 for large N, from fast quenches.", "",
+              f"## The free-volume law near jamming (the packings of rate {compress.JAMMING_RATE:g}, N = 256, radii shrunk by 1 - delta, 200 collisions a disk)", "",
               "| seed | delta | phi | Z | Z (1 - phi/phi_J) |", "|---|---|---|---|---|"]
     for seed, done in enumerate(packings, 1):
         for delta in (1e-3, 1e-4):

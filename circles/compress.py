@@ -42,9 +42,11 @@ MOST_RATE = 10.0
 #: The fastest growth that ends in a jammed packing (faster growth arrests chains of disks
 #: whose pressure diverges with few contacts behind it: see the docs' Compression page).
 JAMMING_MOST_RATE = 0.01
-#: Towards jamming, above this Z, the growth slows as sqrt(SLOW_FROM / Z): the disks then settle
-#: in their cages between growths, and the packing that stops at the bound is jammed.
-SLOW_FROM = 1000.0
+#: The default rates: towards a target, and to jamming. A packing jammed at rate 0.01 falls
+#: about 0.12 contacts a disk short of isostatic, one at 0.001 less than 0.02: the default jams
+#: slowly enough to be isostatic (docs: Compression).
+RATE = 0.01
+JAMMING_RATE = 0.001
 #: The cells are rebuilt when the radii have grown by this factor since they were laid out.
 CELL_GROWTH = 1.05
 #: The columns of the compression's stats table, a row per interval.
@@ -73,6 +75,23 @@ class Compression:
         return self.stopped in ("pressure", "stalled")
 
 
+@dataclass(frozen=True)
+class Grown:
+    """What `grow` reached: positions, velocities and radii (float64 arrays), and the figures of a
+    `Compression` but its simulation."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    radius: np.ndarray
+    compressibility: float
+    stopped: str
+    events: int
+    pair_collisions: int
+    time: float
+    wall_s: float
+    rows: list
+
+
 def check_target(to, start_fraction):
     """`to` as "jammed" or an area fraction above the start's and at most DENSEST; else a
     ValueError naming the value, the limit and the fix."""
@@ -89,6 +108,11 @@ def check_target(to, start_fraction):
         raise ValueError(f"--to {to:g} is above the densest packing of disks, pi/sqrt(12) = {DENSEST:.6f}: give a "
                          "target at most that (a random packing jams near 0.82 to 0.84; use --to jammed)")
     return float(to)
+
+
+def default_rate(to):
+    """The rate a compression to `to` takes when none is given."""
+    return JAMMING_RATE if to == "jammed" else RATE
 
 
 def check_rate(rate):
@@ -249,19 +273,19 @@ def contact_number(simulation, tolerance=1e-4):
         alive &= ~rattlers
 
 
-def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=None):
+def compress(source, to, rate=None, *, pressure_bound=PRESSURE_BOUND, on_row=None):
     """Grow the disks of `source` (a `Scene` of the event scheme, or a `Simulation`) until the
-    area fraction `to`, or until they jam (`to="jammed"`), at growth rate `rate`; returns a
-    `Compression`. `on_row(row)` is called with each interval's stats row as it comes."""
+    area fraction `to`, or until they jam (`to="jammed"`), at growth rate `rate` (by default
+    RATE, or JAMMING_RATE to jamming); returns a `Compression`. `on_row(row)` is called with
+    each interval's stats row as it comes."""
     from . import placement
     from .backend import ensure_init
-    from .observables import temperature
     from .scene import Scene, area_fraction
     from .simulation import Simulation
 
     ensure_init()
-    rate = check_rate(rate)
-    pressure_bound = check_bound(pressure_bound)
+    rate = check_rate(default_rate(to) if rate is None else rate)
+    check_bound(pressure_bound)
     if isinstance(source, Scene):
         if source.scheme != "event":
             raise ValueError("compression needs the event scheme (scheme = \"event\"): growing disks meet at times "
@@ -276,6 +300,23 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         box, boundary = tuple(float(b) for b in source.box), source.boundary
     else:
         raise TypeError(f"compress takes a circles.Scene or a Simulation, not {type(source).__name__}")
+    grown = grow(pos, vel, radius, mass, box, boundary, to, rate, pressure_bound=pressure_bound, on_row=on_row)
+    sim = Simulation.from_arrays(grown.pos, grown.vel, grown.radius, mass, box=box, boundary=boundary,
+                                 scheme="event", precision="f64", color=color)
+    return Compression(simulation=sim, area_fraction=area_fraction(grown.radius, box),
+                       compressibility=grown.compressibility, stopped=grown.stopped, events=grown.events,
+                       pair_collisions=grown.pair_collisions, time=grown.time, wall_s=grown.wall_s, rows=grown.rows)
+
+
+def grow(pos, vel, radius, mass, box, boundary, to, rate, *, pressure_bound=PRESSURE_BOUND, on_row=None):
+    """The arrays of `compress`, grown: a `Grown` of the positions, velocities and radii reached,
+    with the figures of the `Compression`. The rate is checked here; the event engine's kernels
+    need Taichi started."""
+    from .observables import temperature
+    from .scene import area_fraction
+
+    rate = check_rate(rate)
+    pressure_bound = check_bound(pressure_bound)
     n = len(radius)
     radius = np.asarray(radius, np.float64)
     mass = np.asarray(mass, np.float64)
@@ -311,16 +352,15 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
     while stopped is None:
         # Each interval starts afresh from the radii reached, on a clock of its own: the speeds
         # were rescaled, so every event is predicted again.
-        g_now = g if to != "jammed" or not z > SLOW_FROM else g * math.sqrt(SLOW_FROM / z)
         left = final_scale / grown  # the growth left to the target
         cell_scale = min(left, CELL_GROWTH)
-        engine.layout(0.0, g_now, cell_scale)
-        end = min((left - 1.0) / g_now, (cell_scale - 1.0) / g_now)
+        engine.layout(0.0, g, cell_scale)
+        end = min((left - 1.0) / g, (cell_scale - 1.0) / g)
         virial_before = float(engine.totals[engine.growth.VIRIAL])
         reached = engine.run(end, per_interval)
         engine.synchronise(reached)
         kt_end = kt(engine.v)
-        step = 1.0 + g_now * reached
+        step = 1.0 + g * reached
         engine.r0 *= step
         engine.tau[:] = 0.0
         grown *= step
@@ -340,7 +380,7 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
                 on_row(row)
         pairs_before = pairs
         engine.v *= math.sqrt(kt0 / kt_end)
-        if reached >= end and end == (left - 1.0) / g_now:
+        if reached >= end and end == (left - 1.0) / g:
             stopped = "target" if to != "jammed" else "stalled"
         elif z > pressure_bound:  # jammed, or (with a target) jammed before it
             stopped = "pressure"
@@ -351,12 +391,10 @@ def compress(source, to, rate=0.01, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         scale = math.nextafter(scale, 0.0)  # the target, not a unit in the last place above it
     radii = radius * scale
     radii *= min(1.0, largest_scale(engine.x, radii, box, periodic))
-    sim = Simulation.from_arrays(engine.x, engine.v, radii, mass, box=box, boundary=boundary, scheme="event",
-                                 precision="f64", color=color)
-    return Compression(simulation=sim, area_fraction=area_fraction(radii, box), compressibility=z,
-                       stopped=stopped, events=int(engine.totals[engine.growth.EVENTS]),
-                       pair_collisions=int(engine.totals[engine.growth.PAIRS]), time=elapsed,
-                       wall_s=time.perf_counter() - started, rows=rows)
+    return Grown(pos=engine.x, vel=engine.v, radius=radii, compressibility=z, stopped=stopped,
+                 events=int(engine.totals[engine.growth.EVENTS]),
+                 pair_collisions=int(engine.totals[engine.growth.PAIRS]), time=elapsed,
+                 wall_s=time.perf_counter() - started, rows=rows)
 
 
 # ---- the command line ---------------------------------------------------------------------
@@ -392,9 +430,9 @@ def _arguments(parser):
     grow.add_argument("--to", required=True, metavar="PHI|jammed",
                       help="the area fraction to stop at, or jammed: until Z passes --pressure-bound")
     grow.add_argument("--out", required=True, metavar="PACKED.gsd", help="the packing, one GSD frame")
-    grow.add_argument("--rate", type=float, default=0.01, metavar="R",
-                      help="growth of the mean diameter per unit time, in thermal speeds sqrt(kT/m) (default 0.01; "
-                           f"at most {JAMMING_MOST_RATE:g} with --to jammed)")
+    grow.add_argument("--rate", type=float, metavar="R",
+                      help=f"growth of the mean diameter per unit time, in thermal speeds sqrt(kT/m) (default {RATE:g}; "
+                           f"{JAMMING_RATE:g} and at most {JAMMING_MOST_RATE:g} with --to jammed)")
     grow.add_argument("--pressure-bound", type=float, default=PRESSURE_BOUND, metavar="Z",
                       help=f"--to jammed stops when Z = PA/NkT passes this (default {PRESSURE_BOUND:g})")
     grow.add_argument("--stats", metavar="RUN.csv", help="a CSV row per interval of the compression")
@@ -423,6 +461,8 @@ def _check(args, made):
                          "the growth; drop --scheme or give --scheme event")
     try:
         to = _target(args.to)
+        if args.rate is None:
+            args.rate = default_rate(to)
         check_rate(args.rate)
         check_bound(args.pressure_bound)
         if to == "jammed":

@@ -13,7 +13,7 @@ from numbers import Integral, Real
 import numpy as np
 
 MASS_MODELS = ("radius", "area", "equal")
-STARTS = ("fluid", "crystal")
+STARTS = ("fluid", "crystal", "compressed")
 BOUNDARIES = ("walls", "periodic")
 SCHEMES = ("event", "discrete")
 PRECISIONS = ("f32", "f64")
@@ -349,7 +349,9 @@ class Scene:
     crystal: (nx, ny), the columns and rows of a triangular crystal of equal disks in a periodic
     box: n = nx ny, ny even, and the box of aspect nx : ny sqrt(3)/2 that the crystal fits
     exactly (from area_fraction, or a box of that aspect). start: "fluid" (circles placed at
-    random, `circles.placement`) or "crystal" (on the perfect crystal; needs crystal). Both
+    random, `circles.placement`), "crystal" (on the perfect crystal; needs crystal) or
+    "compressed" (placed at half the area fraction and compressed to it, `circles.compress`: a
+    fluid above freezing too; event scheme, f64). Both
     starts of one crystal shape share the box, so runs from each can be set side by side.
     species: circles of several sizes in place of radius, as entries {"count": C, "radius": R}
     or {"fraction": F, "radius": R} (fractions of n, the last species taking what rounding
@@ -400,6 +402,12 @@ class Scene:
         _choice("scheme", self.scheme, SCHEMES)
         _choice("precision", self.precision, PRECISIONS)
         check_speed(vhi, self.precision)
+        if self.start == "compressed" and self.precision != "f64":
+            raise ValueError("start = 'compressed' needs precision = 'f64': a compression leaves pairs at contact, "
+                             "which positions rounded to float32 would overlap; give precision = 'f64'")
+        if self.start == "compressed" and not vhi > 0:
+            raise ValueError(f"start = 'compressed' needs moving circles, not speed = {self.speed!r}: the disks "
+                             "grow while they collide; give a speed above 0")
         dt = check_dt(self.dt)
         check_count("seed", self.seed)
         check_fits(rhi, box, self.boundary)

@@ -7,6 +7,7 @@ import math
 import os
 
 from .command import UsageError, sweep_or_scene
+from .scene import STARTS
 
 SHOWCASE_SCENE = {
     "n": 1500,
@@ -43,9 +44,10 @@ def add_scene_flags(parser):
     scene.add_argument("--species", type=species_entry, nargs="+", metavar="COUNT:R",
                        help="circles of several sizes, in place of --radius: COUNT circles (or a FRACTION of --n) of "
                             "radius R each, e.g. --species 500:0.5 500:0.7")
-    scene.add_argument("--start", choices=("fluid", "crystal"),
+    scene.add_argument("--start", choices=STARTS,
                        help="fluid: circles placed at random (the default); crystal: on the perfect crystal of "
-                            "--crystal")
+                            "--crystal; compressed: placed at half the area fraction and compressed to it (a fluid "
+                            "above freezing too)")
 
 
 def species_entry(text):

@@ -203,6 +203,27 @@ def scene_circles(scene):
     if scene.start == "crystal":
         from .lattice import crystal_positions
         pos = crystal_positions(*scene.crystal, scene.box)
+    elif scene.start == "compressed":
+        pos, vel, radius = compressed(radius, vel, mass, scene, rng)
     else:
         pos = place(radius, scene.box, periodic, scene.seed, rng, single=scene.precision == "f32")
     return pos, vel, radius, mass, color
+
+
+def compressed(radius, vel, mass, scene, rng):
+    """(pos, vel, radius) of a compressed start: the circles placed at random at half the area
+    fraction (radii over sqrt 2), then grown at `compress.RATE` to their radii while they
+    collide. Above freezing this is the fluid side: placement there keeps the lattice's rows.
+    The radii come back within round-off of the scene's, trimmed so that no pair overlaps."""
+    from ..compress import RATE, grow
+
+    periodic = scene.boundary == "periodic"
+    half = radius / math.sqrt(2.0)
+    pos = place(half, scene.box, periodic, scene.seed, rng)
+    target = area_fraction(radius, scene.box)
+    grown = grow(pos, vel, half, mass, scene.box, scene.boundary, target, RATE)
+    if grown.stopped != "target":
+        raise ValueError(f"start = 'compressed': the circles jammed at area fraction "
+                         f"{area_fraction(grown.radius, scene.box):.4f}, short of {target:.4f}; give a smaller "
+                         "area_fraction, or start = 'fluid' or 'crystal'")
+    return grown.pos, grown.vel, grown.radius
