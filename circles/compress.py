@@ -75,23 +75,6 @@ class Compression:
         return self.stopped in ("pressure", "stalled")
 
 
-@dataclass(frozen=True)
-class Grown:
-    """What `grow` reached: positions, velocities and radii (float64 arrays), and the figures of a
-    `Compression` but its simulation."""
-
-    pos: np.ndarray
-    vel: np.ndarray
-    radius: np.ndarray
-    compressibility: float
-    stopped: str
-    events: int
-    pair_collisions: int
-    time: float
-    wall_s: float
-    rows: list
-
-
 def check_target(to, start_fraction):
     """`to` as "jammed" or an area fraction above the start's and at most DENSEST; else a
     ValueError naming the value, the limit and the fix."""
@@ -280,7 +263,7 @@ def compress(source, to, rate=None, *, pressure_bound=PRESSURE_BOUND, on_row=Non
     each interval's stats row as it comes."""
     from . import placement
     from .backend import ensure_init
-    from .scene import Scene, area_fraction
+    from .scene import Scene
     from .simulation import Simulation
 
     ensure_init()
@@ -300,17 +283,16 @@ def compress(source, to, rate=None, *, pressure_bound=PRESSURE_BOUND, on_row=Non
         box, boundary = tuple(float(b) for b in source.box), source.boundary
     else:
         raise TypeError(f"compress takes a circles.Scene or a Simulation, not {type(source).__name__}")
-    grown = grow(pos, vel, radius, mass, box, boundary, to, rate, pressure_bound=pressure_bound, on_row=on_row)
-    sim = Simulation.from_arrays(grown.pos, grown.vel, grown.radius, mass, box=box, boundary=boundary,
-                                 scheme="event", precision="f64", color=color)
-    return Compression(simulation=sim, area_fraction=area_fraction(grown.radius, box),
-                       compressibility=grown.compressibility, stopped=grown.stopped, events=grown.events,
-                       pair_collisions=grown.pair_collisions, time=grown.time, wall_s=grown.wall_s, rows=grown.rows)
+    pos, vel, radii, done = grow(pos, vel, radius, mass, box, boundary, to, rate, pressure_bound=pressure_bound,
+                                 on_row=on_row)
+    done.simulation = Simulation.from_arrays(pos, vel, radii, mass, box=box, boundary=boundary, scheme="event",
+                                             precision="f64", color=color)
+    return done
 
 
 def grow(pos, vel, radius, mass, box, boundary, to, rate, *, pressure_bound=PRESSURE_BOUND, on_row=None):
-    """The arrays of `compress`, grown: a `Grown` of the positions, velocities and radii reached,
-    with the figures of the `Compression`. The rate is checked here; the event engine's kernels
+    """The arrays of `compress`, grown: (positions, velocities, radii) reached, float64, and the
+    `Compression` with no simulation yet. The rate is checked here; the event engine's kernels
     need Taichi started."""
     from .observables import temperature
     from .scene import area_fraction
@@ -391,10 +373,10 @@ def grow(pos, vel, radius, mass, box, boundary, to, rate, *, pressure_bound=PRES
         scale = math.nextafter(scale, 0.0)  # the target, not a unit in the last place above it
     radii = radius * scale
     radii *= min(1.0, largest_scale(engine.x, radii, box, periodic))
-    return Grown(pos=engine.x, vel=engine.v, radius=radii, compressibility=z, stopped=stopped,
-                 events=int(engine.totals[engine.growth.EVENTS]),
-                 pair_collisions=int(engine.totals[engine.growth.PAIRS]), time=elapsed,
-                 wall_s=time.perf_counter() - started, rows=rows)
+    return engine.x, engine.v, radii, Compression(
+        simulation=None, area_fraction=area_fraction(radii, box), compressibility=z, stopped=stopped,
+        events=int(engine.totals[engine.growth.EVENTS]), pair_collisions=int(engine.totals[engine.growth.PAIRS]),
+        time=elapsed, wall_s=time.perf_counter() - started, rows=rows)
 
 
 # ---- the command line ---------------------------------------------------------------------

@@ -221,9 +221,8 @@ def compressed(radius, vel, mass, scene, rng):
     half = radius / math.sqrt(2.0)
     pos = place(half, scene.box, periodic, scene.seed, rng)
     target = area_fraction(radius, scene.box)
-    grown = grow(pos, vel, half, mass, scene.box, scene.boundary, target, RATE)
-    if grown.stopped != "target":
-        raise ValueError(f"start = 'compressed': the circles jammed at area fraction "
-                         f"{area_fraction(grown.radius, scene.box):.4f}, short of {target:.4f}; give a smaller "
-                         "area_fraction, or start = 'fluid' or 'crystal'")
-    return grown.pos, grown.vel, grown.radius
+    pos, vel, grown, done = grow(pos, vel, half, mass, scene.box, scene.boundary, target, RATE)
+    if done.stopped != "target":
+        raise ValueError(f"start = 'compressed': the circles jammed at area fraction {done.area_fraction:.4f}, short "
+                         f"of {target:.4f}; give a smaller area_fraction, or start = 'fluid' or 'crystal'")
+    return pos, vel, grown
