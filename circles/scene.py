@@ -351,8 +351,8 @@ class Scene:
     exactly (from area_fraction, or a box of that aspect). start: "fluid" (circles placed at
     random, `circles.placement`), "crystal" (on the perfect crystal; needs crystal) or
     "compressed" (placed at half the area fraction and compressed to it, `circles.compress`: a
-    fluid above freezing too; event scheme, f64). Both
-    starts of one crystal shape share the box, so runs from each can be set side by side.
+    fluid above freezing too; f64). All starts of one crystal shape share the box, so runs from
+    each can be set side by side.
     species: circles of several sizes in place of radius, as entries {"count": C, "radius": R}
     or {"fraction": F, "radius": R} (fractions of n, the last species taking what rounding
     leaves); held as ((count, radius), ...), the circles in that order, radius then their range.

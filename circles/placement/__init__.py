@@ -215,8 +215,10 @@ def compressed(radius, vel, mass, scene, rng):
     fraction (radii over sqrt 2), then grown at `compress.RATE` to their radii while they
     collide. Above freezing this is the fluid side: placement there keeps the lattice's rows.
     The radii come back within round-off of the scene's, trimmed so that no pair overlaps."""
+    from ..backend import ensure_init
     from ..compress import RATE, grow
 
+    ensure_init()  # the growth engine's kernels
     periodic = scene.boundary == "periodic"
     half = radius / math.sqrt(2.0)
     pos = place(half, scene.box, periodic, scene.seed, rng)
