@@ -144,7 +144,7 @@ class Simulation:
         self.periodic = boundary == "periodic"
         self._real = _REAL[precision]
         self._np_real = _NP_REAL[precision]
-        self.dt = float(dt) if dt is not None else default_dt(scheme, radius, vel)
+        self.dt = float(dt) if dt is not None else default_dt(scheme, radius, vel, box)
         self.time = 0.0
         self.steps = 0
         # Callables f(sim) run after each step (or batch of steps), e.g. `trajectory.ImageTracker`.
@@ -346,7 +346,7 @@ class Simulation:
         dt = check_dt(value)
         if dt is None:
             state = self.state()
-            dt = default_dt(self.scheme, state.radius, state.vel)
+            dt = default_dt(self.scheme, state.radius, state.vel, self.box)
         self._dt = dt
 
     @property

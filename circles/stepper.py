@@ -68,8 +68,9 @@ class Stepper:
         return False
 
     @staticmethod
-    def default_dt(radius, vmax):
-        """The step length for circles of these radii whose fastest moves at vmax > 0."""
+    def default_dt(radius, vmax, collision_rate=0.0):
+        """The step length for circles of these radii whose fastest moves at vmax > 0, colliding
+        `collision_rate` times a circle per unit time (0: not known)."""
         raise NotImplementedError
 
     @property

@@ -69,7 +69,7 @@ class DiscreteStepper(Stepper):
         return True
 
     @staticmethod
-    def default_dt(radius, vmax):
+    def default_dt(radius, vmax, collision_rate=0.0):
         """The step in which the fastest circle moves DISCRETE_STEP_FRACTION of the least radius."""
         return DISCRETE_STEP_FRACTION * float(radius.min()) / vmax
 

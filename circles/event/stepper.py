@@ -27,6 +27,12 @@ SPEED_MARGIN = 1.1
 #: Default step: the fastest circle moves this many mean radii per step (the mean, not the
 #: largest: a few large circles must not make every step long and every grid cell wide).
 EVENT_STEP_RADII = 0.3
+#: ... and at most this many collisions a circle takes part in per step, by Enskog's collision
+#: frequency at the scene's area fraction (`theory.enskog_rate`). Dense circles collide many
+#: times while the fastest moves a radius: there a step's cells would hold many circles that
+#: every collision searches, and a shorter step with smaller cells costs less (the
+#: Performance page of the docs). A dilute scene's step is the radii's.
+EVENT_STEP_COLLISIONS = 0.75
 
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
@@ -110,9 +116,14 @@ class EventStepper(Stepper):
     WORK_COUNTERS = Stepper.WORK_COUNTERS + ("sum_log_full",)
 
     @staticmethod
-    def default_dt(radius, vmax):
-        """The step in which the fastest circle moves EVENT_STEP_RADII mean radii."""
-        return EVENT_STEP_RADII * float(radius.mean()) / vmax
+    def default_dt(radius, vmax, collision_rate=0.0):
+        """The step in which the fastest circle moves EVENT_STEP_RADII mean radii, and a circle
+        takes part in at most EVENT_STEP_COLLISIONS collisions at `collision_rate` (collisions
+        a circle takes part in per unit time; 0: not known)."""
+        dt = EVENT_STEP_RADII * float(radius.mean()) / vmax
+        if collision_rate > 0:
+            dt = min(dt, EVENT_STEP_COLLISIONS / collision_rate)
+        return dt
 
     @classmethod
     def splits_into_parts(cls, n):

@@ -1,0 +1,247 @@
+"""The benchmark's dense section: equal hard disks near melting, where collisions are many.
+
+    python bench/dense.py [--out FOLDER] [--quick]
+
+Writes FOLDER/<machine>/dense.md, dense.csv and dense.png (default FOLDER: outputs/bench):
+- pair collisions per second of the event scheme at area fraction 0.70 (0.698 at N = 870, the
+  melting sweep's box) for N = 870, 16384 and 1e6, on one thread and on two;
+- the same on one thread at 0.45 and 0.70 for N from 1024 to 1e6 (the plot);
+- the figure of merit of the pressure at N = 870, 0.698, one thread: the standard error of
+  beta P d^2 times the square root of the CPU seconds of the measurement, and the CPU seconds
+  that a standard error of 0.01 takes.
+
+Every scene: radius 0.5, mass 1, all speeds 1 at the start, a periodic box that fits a
+triangular crystal of nx columns and ny rows, started from that crystal, f64, default dt. Each
+row runs in a process of its own (Taichi's threads are set when it starts); a row warms up for
+a number of collisions a circle, then measures. `--quick`: shorter runs and no 1e6 rows.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+#: (N, crystal columns, rows): the melting sweep's box, then near-square boxes.
+CRYSTALS = {870: (29, 30), 1024: (32, 32), 16384: (128, 128), 262144: (512, 512), 1_000_000: (1000, 1000)}
+#: The rows of the thread table: (N, area fraction).
+THREAD_ROWS = ((870, 0.698), (16384, 0.70), (1_000_000, 0.70))
+#: The plot's sizes, at each of its area fractions, on one thread.
+CURVE_SIZES = (1024, 16384, 262144, 1_000_000)
+CURVE_FRACTIONS = (0.45, 0.70)
+#: Collisions a circle takes part in before the measurement, and during it; and pair
+#: collisions at least in each, so that a small N is measured over many steps.
+WARM_COLLISIONS = 20.0
+MEASURE_COLLISIONS = 10.0
+LEAST_WARM_PAIRS = 2e6
+LEAST_MEASURED_PAIRS = 5e6
+#: The figure of merit's run: equilibration and measurement in time units, in blocks.
+MERIT = dict(n=870, fraction=0.698, equilibrate=2000.0, measure=20000.0, block=1000.0)
+QUICK_MERIT = dict(n=870, fraction=0.698, equilibrate=500.0, measure=4000.0, block=250.0)
+
+
+def scene(circles, n, fraction):
+    nx, ny = CRYSTALS[n]
+    return circles.Scene(n=n, crystal=[nx, ny], area_fraction=fraction, radius=0.5, speed=[1.0, 1.0],
+                         mass="equal", boundary="periodic", start="crystal", precision="f64", seed=1)
+
+
+def run_rate(n, fraction, threads, scale):
+    """One row: pair collisions per second and per CPU second over the measurement."""
+    import circles
+    circles.init(arch="cpu", cpu_max_num_threads=threads)
+    t0 = time.perf_counter()
+    sim = circles.Simulation(scene(circles, n, fraction))
+    place_s = time.perf_counter() - t0
+    # Enskog's estimate of the collisions a circle takes part in per unit time sets the lengths.
+    from circles.schemes import collision_rate
+    st = sim.state()
+    omega = collision_rate(st.radius, st.vel, sim.box)
+    # Pair collisions per unit time: n omega / 2.
+    sim.advance(scale * max(WARM_COLLISIONS * n / 2, LEAST_WARM_PAIRS) / (n * omega / 2))
+    before = sim.stats()["pair_collisions"]
+    wall, cpu = time.perf_counter(), time.process_time()
+    sim.advance(scale * max(MEASURE_COLLISIONS * n / 2, LEAST_MEASURED_PAIRS) / (n * omega / 2))
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    pairs = sim.stats()["pair_collisions"] - before
+    return dict(n=n, area_fraction=fraction, threads=threads, dt=sim.dt, steps=sim.steps, place_s=place_s,
+                collisions=pairs, wall_s=wall, cpu_s=cpu, collisions_per_s=pairs / wall,
+                collisions_per_cpu_s=pairs / cpu)
+
+
+def run_merit(cfg):
+    """The pressure's standard error against CPU seconds at N = 870, 0.698, one thread."""
+    import numpy as np
+
+    import circles
+    from circles import observables
+    circles.init(arch="cpu", cpu_max_num_threads=1)
+    sim = circles.Simulation(scene(circles, cfg["n"], cfg["fraction"]))
+    sim.advance(cfg["equilibrate"])
+    blocks = int(round(cfg["measure"] / cfg["block"]))
+    values, cpu, first = [], 0.0, sim.stats()
+    start = first
+    for _ in range(blocks):
+        t = time.process_time()
+        sim.advance(cfg["block"])
+        cpu += time.process_time() - t
+        now = sim.stats()
+        values.append(observables.interval(start, now, sim.n, sim.box, sim.boundary, 0.5, 1.0)["reduced_pressure"])
+        start = now
+    values = np.array(values)
+    row = dict(n=cfg["n"], area_fraction=cfg["fraction"], threads=1, equilibrate=cfg["equilibrate"],
+               measure=cfg["measure"], cpu_s=cpu, collisions=now["pair_collisions"] - first["pair_collisions"],
+               mean=float(values.mean()))
+    # Standard errors from blocks of 1, 2 and 4 times the block: they agree when the blocks are
+    # longer than the pressure's correlation time.
+    for group in (1, 2, 4):
+        m = len(values) // group
+        means = values[: m * group].reshape(m, group).mean(axis=1)
+        se = float(means.std(ddof=1) / math.sqrt(m)) if m > 1 else float("nan")
+        row[f"se_blocks_{m}"] = se
+    se = row[f"se_blocks_{len(values) // 2}"]
+    row["se"] = se
+    row["merit"] = se * math.sqrt(cpu)
+    row["cpu_s_to_se_0_01"] = cpu * (se / 0.01) ** 2
+    return row
+
+
+def child(args):
+    """Run one row in this process and print it as JSON (the parent's subprocess)."""
+    kind = args[0]
+    if kind == "rate":
+        n, fraction, threads, scale = int(args[1]), float(args[2]), int(args[3]), float(args[4])
+        print(json.dumps(run_rate(n, fraction, threads, scale)))
+    else:
+        print(json.dumps(run_merit(json.loads(args[1]))))
+
+
+def in_process(*args):
+    out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", *map(str, args)], check=True,
+                         capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def log(*a):
+    print(time.strftime("%H:%M:%S"), *a, flush=True)
+
+
+def si(v):
+    return f"{v / 1e6:.3g} M"
+
+
+def write(outdir, meta, threads, curve, merit):
+    rows = [dict(table="threads", **r) for r in threads] + [dict(table="curve", **r) for r in curve]
+    if merit:
+        rows.append(dict(table="merit", **merit))
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(os.path.join(outdir, "dense.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        w.writeheader()
+        w.writerows(rows)
+    lines = [f"# Dense hard disks: {meta['machine']}", "",
+             f"Command: `{meta['command']}`  ", f"Date: {meta['date']}  ", f"Machine: {meta['machine']}  ",
+             f"Wall time of the run: {meta['wall_s']:.0f} s.", "",
+             "Equal disks (radius 0.5, mass 1, speeds 1 at the start) in a periodic box that fits a triangular "
+             f"crystal, started from it, f64, default dt; each row warms up for {WARM_COLLISIONS:g} collisions a "
+             f"circle and measures {MEASURE_COLLISIONS:g}, and at least {LEAST_WARM_PAIRS:.0e} and "
+             f"{LEAST_MEASURED_PAIRS:.0e} pair collisions (Enskog's rate sets the times).", "",
+             "## Collisions per second, 1 and 2 threads", "",
+             "| N | area fraction | threads | dt | pair collisions/s | per CPU s | measured s |",
+             "|---|---|---|---|---|---|---|"]
+    for r in threads:
+        lines.append(f"| {r['n']} | {r['area_fraction']} | {r['threads']} | {r['dt']:.4g} | "
+                     f"{si(r['collisions_per_s'])} | {si(r['collisions_per_cpu_s'])} | {r['wall_s']:.1f} |")
+    by = {(r["n"], r["area_fraction"], r["threads"]): r for r in threads}
+    for n, fraction in THREAD_ROWS:
+        one, two = by.get((n, fraction, 1)), by.get((n, fraction, 2))
+        if one and two:
+            lines.append("")
+            lines.append(f"N = {n}: two threads make {two['collisions_per_s'] / one['collisions_per_s']:.2f} times "
+                         "the collisions per second of one.")
+    lines += ["", "## Collisions per second against N, one thread", "",
+              "| N | area fraction | dt | pair collisions/s |", "|---|---|---|---|"]
+    for r in curve:
+        lines.append(f"| {r['n']} | {r['area_fraction']} | {r['dt']:.4g} | {si(r['collisions_per_s'])} |")
+    if merit:
+        m = merit
+        ses = ", ".join(f"{k[len('se_blocks_'):]} blocks {v:.4f}" for k, v in m.items() if k.startswith("se_blocks_"))
+        lines += ["", "## The pressure's error against CPU time", "",
+                  f"N = {m['n']}, area fraction {m['area_fraction']}, one thread: {m['equilibrate']:g} time units of "
+                  f"equilibration, then {m['measure']:g} measured, {m['collisions']:.3g} pair collisions in "
+                  f"{m['cpu_s']:.1f} CPU s.", "",
+                  f"- beta P d^2 = {m['mean']:.4f}; standard error {ses} (the figure of merit takes the middle one)",
+                  f"- figure of merit SE x sqrt(CPU s) = {m['merit']:.3f}",
+                  f"- CPU seconds to a standard error of 0.01: {m['cpu_s_to_se_0_01']:.0f}"]
+    with open(os.path.join(outdir, "dense.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def plot(outdir, curve):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for fraction in CURVE_FRACTIONS:
+        rows = sorted((r for r in curve if r["area_fraction"] == fraction), key=lambda r: r["n"])
+        if rows:
+            ax.plot([r["n"] for r in rows], [r["collisions_per_s"] / 1e6 for r in rows], "o-",
+                    label=f"area fraction {fraction}")
+    ax.set_xscale("log")
+    ax.set_xlabel("N")
+    ax.set_ylabel("pair collisions per second (millions)")
+    ax.set_title("event scheme, one thread")
+    ax.set_ylim(bottom=0)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(os.path.join(outdir, "dense.png"), dpi=100)
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--child"]:
+        return child(argv[1:])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join("outputs", "bench"), help="folder of the results")
+    ap.add_argument("--quick", action="store_true", help="shorter runs, no 1e6 rows")
+    args = ap.parse_args(argv)
+    from bench import cpu_model, slug
+    machine = cpu_model()
+    outdir = os.path.join(args.out, slug(machine))
+    os.makedirs(outdir, exist_ok=True)
+    start = time.perf_counter()
+    scale = 0.25 if args.quick else 1.0
+    big = (lambda n: n < 1_000_000) if args.quick else (lambda n: True)
+    threads, curve, merit = [], [], None
+    meta = dict(machine=machine, command="python " + " ".join([os.path.relpath(__file__)] + argv),
+                date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()))
+    for n, fraction in THREAD_ROWS:
+        if big(n):
+            for k in (1, 2):
+                r = in_process("rate", n, fraction, k, scale)
+                threads.append(r)
+                log(f"N={n} eta={fraction} threads={k}: {si(r['collisions_per_s'])} collisions/s, dt {r['dt']:.4g}")
+    for fraction in CURVE_FRACTIONS:
+        for n in CURVE_SIZES:
+            if big(n):
+                r = in_process("rate", n, fraction, 1, scale)
+                curve.append(r)
+                log(f"N={n} eta={fraction}: {si(r['collisions_per_s'])} collisions/s, dt {r['dt']:.4g}")
+    merit = in_process("merit", json.dumps(QUICK_MERIT if args.quick else MERIT))
+    log(f"merit: SE {merit['se']:.4f} in {merit['cpu_s']:.1f} CPU s: {merit['merit']:.3f}; "
+        f"{merit['cpu_s_to_se_0_01']:.0f} CPU s to SE 0.01")
+    meta["wall_s"] = time.perf_counter() - start
+    write(outdir, meta, threads, curve, merit)
+    plot(outdir, curve)
+    log(f"wrote {outdir}/dense.md, dense.csv, dense.png")
+
+
+if __name__ == "__main__":
+    main()
