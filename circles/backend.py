@@ -203,8 +203,12 @@ SERIAL_N = 30_000
 #: than in parts on every thread (`event.queue_parts`). The parts pay for their split, their
 #: windows and a dozen launches a step, a few milliseconds, which on two threads the parts
 #: win back from about 1.5e5 circles. More threads share that fixed cost among more parts,
-#: hence the product. With one thread there are no parts: always one queue.
+#: hence the product.
 EVENT_SERIAL_WORK = 200_000
+#: With one thread, the event scheme runs its steps in parts from this many circles: the parts
+#: run in turn, each a region of the box whose circles' arrays stay in the cache, where one
+#: queue takes its events all over arrays larger than the cache (the Performance page).
+EVENT_PARTS_ONE_THREAD_N = 500_000
 
 
 def cpu_threads() -> int:
@@ -219,7 +223,9 @@ def serial_loops(n: int, scheme: str = "discrete") -> bool:
         return False
     if scheme == "event":
         threads = cpu_threads()
-        return n <= SERIAL_N or threads < 2 or n * threads <= EVENT_SERIAL_WORK
+        if threads < 2:
+            return n < EVENT_PARTS_ONE_THREAD_N
+        return n <= SERIAL_N or n * threads <= EVENT_SERIAL_WORK
     return n <= SERIAL_N
 
 

@@ -52,13 +52,16 @@ def on_threads(monkeypatch):
 def test_event_scenes_up_to_a_work_limit_run_on_one_thread(circles_cpu, monkeypatch, threads):
     """The event scheme runs on one thread (one queue, `event.queue_step`) while its circles
     times the threads are at most EVENT_SERIAL_WORK, up to SERIAL_N circles whatever the
-    threads, and always with one thread (no parts); the discrete scheme up to SERIAL_N circles."""
+    threads, and with one thread below EVENT_PARTS_ONE_THREAD_N circles (from there in parts,
+    taken in turn); the discrete scheme up to SERIAL_N circles."""
     from circles import backend
     monkeypatch.setattr(backend, "cpu_threads", lambda: threads)
     limit = backend.EVENT_SERIAL_WORK // threads
-    for n in (1, backend.SERIAL_N, limit, limit + 1, 10**7):
+    alone = backend.EVENT_PARTS_ONE_THREAD_N
+    assert alone == 500_000
+    for n in (1, backend.SERIAL_N, limit, limit + 1, alone - 1, alone, 10**7):
         assert backend.serial_loops(n, "discrete") == (n <= backend.SERIAL_N), n
-        expected = n <= backend.SERIAL_N or threads == 1 or n <= limit
+        expected = (n < alone) if threads == 1 else (n <= backend.SERIAL_N or n <= limit)
         assert backend.serial_loops(n, "event") == expected, (n, threads)
 
 

@@ -2,8 +2,8 @@
 
 `EventStepper.step(h)` measures the largest speed, builds the grid (two levels when a few
 circles are much larger), and then runs the step's events: from one queue on a CPU
-(`queue.queue_step`), split into parts in windows of the step when the CPU has several threads
-(`split.split_parts`, `split.queue_parts`), or in parallel rounds of predict, bound and execute
+(`queue.queue_step`), split into parts in windows of the step when the CPU has several threads,
+or one thread and a scene larger than its cache (`split.split_parts`, `split.queue_parts`), or in parallel rounds of predict, bound and execute
 on a GPU (`rounds`). Every path ends with each circle moved to the step's end. The stepper owns
 its scratch arrays and its tuning constants; the circles' arrays and counts are the
 simulation's (`Simulation`), read afresh at each step since a reorder replaces them.
@@ -128,9 +128,9 @@ class EventStepper(Stepper):
     @classmethod
     def splits_into_parts(cls, n):
         """Whether a CPU simulation of n circles may split its steps into parts: one queue on
-        several threads (counted also where a spread of radii will give a two-level grid and one
+        several threads, or at least EVENT_PARTS_ONE_THREAD_N circles on one (counted also where a spread of radii will give a two-level grid and one
         queue, which is known only after the radii are drawn)."""
-        return cls.uses_queue() and not serial_loops(n, "event") and count_parts() > 1
+        return cls.uses_queue() and not serial_loops(n, "event") and count_parts() >= 1
 
     @staticmethod
     def uses_queue():
@@ -164,10 +164,10 @@ class EventStepper(Stepper):
 
     def _setup_parts(self):
         """The event queue's calendar heads, and the arrays of a queue split into parts
-        (`split.split_parts`): on a CPU, with one grid level, when the step's loops run on
-        several threads."""
+        (`split.split_parts`): on a CPU, with one grid level, when the step's loops do not run
+        as one serial loop (`backend.serial_loops`: several threads, or a large scene on one)."""
         sim = self.sim
-        self._parts = self._event_queue and not sim._serial and not sim._two_level and count_parts() > 1
+        self._parts = self._event_queue and not sim._serial and not sim._two_level and count_parts() >= 1
         self._split_wait = 0  # steps left before a split is tried again after one failed
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
         n = sim.n
