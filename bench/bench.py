@@ -5,8 +5,8 @@
 Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
 throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, memory.csv, spread.csv,
 peers.csv, work_precision.csv, targets.csv, results.md (every table, with the command and the
-date, the project's performance targets first, judged on this run by `targets.py`) and
-work_precision.png. A run first removes these files from that folder, so that the folder never
+date, the project's performance targets first, judged on this run by `targets.py`),
+work_precision.png, and dense.md, dense.csv and dense.png. A run first removes these files from that folder, so that the folder never
 mixes two runs (a section skipped or failed leaves no file of an older run). The tables are
 rewritten after every section, so a run stopped early leaves what it measured. With --arch gpu
 the sizes go up to 1e8 in float32, and the pymunk, memory and work-precision sections are left
@@ -53,6 +53,9 @@ What is measured, all in one run and one process:
    pymunk is timed without callbacks and measured in a second, identical run with them. Each
    discrete row is timed on a second run of it, so that no row pays for compiling a kernel
    its steps are the first to need (the extra rounds of long steps).
+5. Dense. bench/dense.py, in processes of its own: equal disks near melting (area fraction
+   0.70), collisions per second on 1 and 2 threads and against N, and the pressure's error
+   against CPU time at N = 870 (dense.md, dense.csv, dense.png; see that script).
 """
 
 import argparse
@@ -115,12 +118,13 @@ GPU = dict(
     sizes=(10_000, 100_000, 1_000_000, 10_000_000, 100_000_000), event_sizes=(100_000, 1_000_000, 10_000_000),
     precisions=("f32",), reps=5, target=0.5, peer_sizes=(), dense_sizes=(1_000, 10_000), render_reps=5,
     copy_numbers=1 << 28, copy_reps=20, memory_sizes=(), spread_sizes=(1_000_000, 10_000_000),
-    placement_n=1_000_000, skip=("peers", "wp", "memory"))
+    placement_n=1_000_000, skip=("peers", "wp", "memory", "dense"))
 #: The sections a run can leave out (--skip).
-SECTIONS = ("throughput", "placement", "memory", "spread", "peers", "wp")
+SECTIONS = ("throughput", "placement", "memory", "spread", "peers", "wp", "dense")
 #: The files a run writes into `<out>/<machine>/` (and removes there first).
 OUTPUT_FILES = ("bandwidth.csv", "throughput.csv", "placement.csv", "render.csv", "compile.csv", "peers.csv",
-                "work_precision.csv", "memory.csv", "spread.csv", "targets.csv", "results.md", "work_precision.png")
+                "work_precision.csv", "memory.csv", "spread.csv", "targets.csv", "results.md", "work_precision.png",
+                "dense.md", "dense.csv", "dense.png")
 #: Default --out: the results kept with the project; QUICK_OUT for --quick or --skip runs.
 FULL_OUT = os.path.join("outputs", "bench")
 QUICK_OUT = os.path.join(tempfile.gettempdir(), "circles-bench-quick")
@@ -1069,6 +1073,13 @@ def main(argv=None):
         wp.extend(guarded("work-precision", work_precision, cfg) or [])
 
     goals = save("work-precision", final=True)
+    if "dense" not in skip:
+        # Dense disks near melting (bench/dense.py), a process a row: its own threads.
+        log("dense")
+        dense = [sys.executable, os.path.join(os.path.dirname(os.path.abspath(__file__)), "dense.py"), "--out",
+                 args.out] + (["--quick"] if args.quick else [])
+        if subprocess.run(dense).returncode != 0:
+            errors.append("dense: bench/dense.py failed (its output above)")
     log("targets")
     for target, measured, met in goals:
         log(f"  {met:>12}: {target}: {measured}")
