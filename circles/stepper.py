@@ -33,6 +33,8 @@ class Stepper:
     ARRAY_BYTES: dict = {}
     #: Bytes per circle more when the scheme splits its steps into parts (several threads).
     PART_BYTES = {"f32": 0, "f64": 0}
+    #: Bytes per circle more for lists of neighbours (`lists_neighbours`).
+    LIST_BYTES = 0
     #: Whether the scheme's collisions are events at known times that it can log.
     LOGS_EVENTS = False
     #: The counters of work that copies of a simulation carry.
@@ -56,11 +58,19 @@ class Stepper:
     @classmethod
     def bytes_per_circle(cls, n, precision):
         """ARRAY_BYTES of a CPU simulation of n circles, with PART_BYTES when it may split its
-        steps into parts (`splits_into_parts`)."""
+        steps into parts (`splits_into_parts`) and LIST_BYTES when it lists neighbours
+        (`lists_neighbours`)."""
         per = cls.ARRAY_BYTES[precision]
         if cls.splits_into_parts(n):
             per += cls.PART_BYTES[precision]
+        if cls.lists_neighbours(n):
+            per += cls.LIST_BYTES
         return per
+
+    @classmethod
+    def lists_neighbours(cls, n):
+        """Whether a CPU simulation of n circles keeps lists of each circle's neighbours."""
+        return False
 
     @classmethod
     def two_levels_allowed(cls):

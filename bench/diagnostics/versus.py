@@ -7,7 +7,7 @@
 The earlier commit is exported with `git archive` into a temporary folder. Each row runs the
 same scene (bench.py's throughput scene: area fraction 0.3, 16:9 walls, f32, radius 0.5, speeds
 in (0.5, 1.0), default dt; seed 1; or with `--scene spread` the radius-spread mixture of
-bench.py's spread rows) in fresh processes, alternating base and this tree `--rounds` times (base first in even
+bench.py's spread rows, or with `--scene dense` bench/dense.py's scene) in fresh processes, alternating base and this tree `--rounds` times (base first in even
 rounds, this tree first in odd ones), so that the load of a shared machine falls on both alike; each process times single steps after `--warm` warm-up steps
 (16 by default, which compile every kernel, the periodic reorder's included; more to time a
 relaxed scene, whose speeds have spread out).
@@ -81,6 +81,13 @@ circles.init(arch=sys.argv[5])
 circles_base.backend._state.update(initialized=True, arch=circles.backend.current_arch())  # one runtime for both
 sims = {}
 for name, pkg in (("base", circles_base), ("this", circles)):
+    if sys.argv[9] == "dense":  # bench/dense.py's scene: equal disks from a crystal near melting
+        nx = 29 if n == 870 else int(round(n ** 0.5))
+        sims[name] = pkg.Simulation(pkg.Scene(n=n, crystal=[nx, n // nx], area_fraction=0.698 if n == 870 else 0.70,
+                                              radius=0.5, speed=[1.0, 1.0], mass="equal", boundary="periodic",
+                                              start="crystal", precision="f64", scheme=scheme, seed=1))
+        sims[name].step(int(sys.argv[7]))
+        continue
     scene = bench_scene(n, scheme, seed=1)
     # The fields both engines' Scene take (an older one may lack some, such as area_fraction).
     sims[name] = pkg.Simulation(pkg.Scene(**{f: getattr(scene, f) for f in scene.__dataclass_fields__
@@ -149,7 +156,7 @@ def run(tree, n, scheme, steps, arch, scene, warm):
     return json.loads(out.strip().splitlines()[-1])
 
 
-def run_paired(base_tree, scratch, n, scheme, steps, arch, warm, batch=1):
+def run_paired(base_tree, scratch, n, scheme, steps, arch, warm, batch=1, scene="bench"):
     """Both engines in one process (`PAIRED`): the base tree's package copied as `circles_base` into
     the folder `scratch` (a temporary one: a folder given as --base is only read)."""
     pkg_dir = Path(scratch) / "paired"
@@ -157,7 +164,7 @@ def run_paired(base_tree, scratch, n, scheme, steps, arch, warm, batch=1):
         shutil.copytree(Path(base_tree) / "circles", pkg_dir / "circles_base")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     out = child([sys.executable, "-c", PAIRED, str(n), scheme, str(steps), str(DIAGNOSTICS), arch, str(pkg_dir),
-                 str(warm), str(batch)], env=env, cwd=str(ROOT))
+                 str(warm), str(batch), scene], env=env, cwd=str(ROOT))
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -178,9 +185,10 @@ def parse_args():
                              "2e6 / N event, 3 to 20)")
     parser.add_argument("--warm", type=int, default=16,
                         help="warm-up steps before the timed ones (at least 16; default: 16)")
-    parser.add_argument("--scene", choices=("bench", "spread"), default="bench",
+    parser.add_argument("--scene", choices=("bench", "spread", "dense"), default="bench",
                         help="spread: bench.py's radius-spread mixture (1%% of the circles 50 times larger; "
-                             "default: bench)")
+                             "dense: bench/dense.py's equal disks from a crystal at 0.70, 0.698 for --n 870, "
+                             "with --interleave; default: bench)")
     parser.add_argument("--interleave", action="store_true",
                         help="both engines in one process, stepped in turn (see above); the bench scene only")
     parser.add_argument("--batch", type=int, default=1,
@@ -200,8 +208,10 @@ def parse_args():
     if args.warm < 16:
         parser.error(f"--warm {args.warm} is below 16: the timed steps would include the first reorder's "
                      "compilation; give 16 or more")
-    if args.interleave and args.scene != "bench":
-        parser.error(f"--interleave runs the bench scene only, not --scene {args.scene}: leave out one of the two")
+    if args.interleave and args.scene == "spread":
+        parser.error("--interleave runs the bench and dense scenes, not --scene spread: leave out one of the two")
+    if args.scene == "dense" and not args.interleave:
+        parser.error("--scene dense runs with --interleave only: add it")
     check_base(parser, args.base)
     return args
 
@@ -213,7 +223,7 @@ def measure_row(args, base_tree, scratch, n, scheme, steps):
     ratios, last = [], {}
     for r in range(args.rounds):
         if args.interleave:
-            result = run_paired(base_tree, scratch, n, scheme, steps, args.arch, args.warm, args.batch)
+            result = run_paired(base_tree, scratch, n, scheme, steps, args.arch, args.warm, args.batch, args.scene)
             ratios += [b / t for b, t in zip(result["base"]["times"], result["this"]["times"])]
         else:
             # Which tree runs first alternates too: on a loaded machine the first of two
@@ -235,8 +245,9 @@ def main():
     how = (", stepped in turn in one process" if args.interleave else "") + f", {args.warm} warm-up steps"
     if args.batch > 1:
         how += f", timed in calls of step({args.batch})"
-    print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}{how}; {what}area fraction "
-          "0.3, walls, f32, default dt")
+    scene = ("equal disks from a triangular crystal, area fraction 0.70 (0.698 at N = 870), periodic, f64, "
+             "default dt") if args.scene == "dense" else f"{what}area fraction 0.3, walls, f32, default dt"
+    print(f"base {args.base} against this tree ({engine_revision()}) on the {args.arch}{how}; {scene}")
     if args.interleave:
         print("Ratio this / base: the median over all pairs of steps of base step time / this step time, with its "
               "quartiles; a median of paired ratios, not the ratio of the two speed columns' medians.\n")

@@ -29,7 +29,7 @@ ndarr = ti.types.ndarray(ndim=1)
 def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.template(), state: ti.template(),
            sums: ti.template(), grid: ti.template(), log: ti.template(), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my,
            r_cut, margin, t_offset, box, vlim2, real: ti.template(), periodic: ti.template(), record: ti.template(),
-           two_level: ti.template(), part: ti.template(), log_sums: ti.template()):
+           two_level: ti.template(), part: ti.template(), log_sums: ti.template(), lists: ti.template()):
     """Execute a filled queue's events in key order up to `horizon` (see above), each followed
     by the searches it calls for; returns (reached, horizon): as `queue_step` returns, and the
     step's end, moved to the time of a collision that would outrun the grid. state: (pos, vel,
@@ -39,7 +39,8 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
     log_sums: () or (sum_i, sum_s, sum_at, chunk), the log to which each event writes what it
     adds to the counts and sums instead (`_add_sums`, one entry an event, taken before it); when
     the log is full the queue stops before the event, and returns reached = -3. Events after
-    `until` (at most the horizon) are left in the queue."""
+    `until` (at most the horizon) are left in the queue. lists: () or the neighbour lists of the
+    step's first predictions (`_first_events_once`), which the searches read."""
     pos, vel, radius, inv_mass, tau, ids, ev_t, ev_p, stamp = ti.static(state)
     heap, where, heap_t, head, nxt, prv, pending = ti.static(queue)
     n = pos.shape[0]
@@ -133,7 +134,7 @@ def _drain(size, horizon, until, reached, most, scale, nb, off, hb, queue: ti.te
                                                      grid[1], grid[2], ncx, ncy, rows, segs, box, horizon, real,
                                                      periodic, grid[3], grid[4], ncx_c, ncy_c, mx, my, r_cut, margin,
                                                      two_level, queue, code, size, c, other,
-                                                     off + subjects - changed, scale, nb, off, hb, part)
+                                                     off + subjects - changed, scale, nb, off, hb, part, lists)
             subjects += more
             size = _queue_fix(y, size, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
             m += 1
@@ -176,14 +177,16 @@ def _first_predictions(pos: ti.template(), vel: ti.template(), radius: ti.templa
                        cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows,
                        segs, box_w, box_h, horizon, coarse_start: ti.template(), coarse_ids: ti.template(), ncx_c,
                        ncy_c, mx, my, r_cut, margin, real: ti.template(), periodic: ti.template(),
-                       two_level: ti.template(), serial: ti.template(), fresh: ti.template()):
+                       two_level: ti.template(), serial: ti.template(), fresh: ti.template(),
+                       lists: ti.template(), list_r2):
     """Every circle's earliest event of the step (`queue_step`), from the clocks `tau` (or
     `STEP_START`): on one thread each pair computed once (`_first_events_once`, one grid level;
-    `fresh`: see there), else each circle's search in full."""
+    `fresh`: see there; `lists`, `list_r2`: the neighbour lists it makes, or ()), else each
+    circle's search in full."""
     n = pos.shape[0]
     if ti.static(serial and not two_level):
         _first_events_once(pos, vel, radius, tau, ids, ev_t, ev_p, cell_of, cell_start, sorted_ids, ncx, ncy, rows,
-                           segs, box_w, box_h, horizon, real, periodic, fresh)
+                           segs, box_w, box_h, horizon, real, periodic, fresh, lists, list_r2)
     else:
         ti.loop_config(serialize=serial)
         for i in range(n):
@@ -191,7 +194,7 @@ def _first_predictions(pos: ti.template(), vel: ti.template(), radius: ti.templa
             t_i, p_i, unused, unused2 = _earliest(i, True, pos, vel, radius, tau, ids, ev_t, ev_p, stamp, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                                                  margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
+                                                  margin, two_level, (), 0, 0, 0, 0, 0, 0.0, 1, 0, 0, (), ())
             ev_t[i] = t_i
             ev_p[i] = p_i
 
@@ -205,8 +208,9 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                t_offset: ti.f64, counters: ndarr, log_t: ndarr, log_i: ndarr, log_j: ndarr, speed_out: ndarr,
                coarse_start: ndarr, coarse_ids: ndarr, ncx_c: ti.i32, ncy_c: ti.i32, mx: ti.i32, my: ti.i32,
                r_cut: ti.f64, margin: ti.f64, most: ti.i32, per_bucket: ti.i32, r_same: ti.f64, w_same: ti.f64,
-               real: ti.template(), periodic: ti.template(), record: ti.template(), two_level: ti.template(),
-               serial: ti.template(), at_start: ti.template(), same: ti.template()) -> ti.f64:
+               list_count: ndarr, list_slots: ndarr, list_r2: ti.f64, real: ti.template(), periodic: ti.template(),
+               record: ti.template(), two_level: ti.template(), serial: ti.template(), at_start: ti.template(),
+               same: ti.template(), listed: ti.template()) -> ti.f64:
     """A whole step from one queue (see above), every circle moved to its end at the last
     (`finish`, in the same launch). Returns the time the step reached: t_end, or the time of a
     collision that would outrun the grid, where the step ends (see the module's docstring);
@@ -223,21 +227,25 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
     `serial`, every circle holds no event, as this kernel's finish leaves it on one thread (and
     the set-up), so that the circles take their walls in the pairs' pass (`_first_events_once`
     with `fresh`). A simulation whose loops run on one thread steps only here. With `same`,
-    every circle's radius and inverse mass are r_same and w_same (`Same`)."""
+    every circle's radius and inverse mass are r_same and w_same (`Same`). With `listed` (on one
+    thread, one grid level, at the step's start), the first predictions list each circle's
+    neighbours within sqrt(list_r2), the grid's reach, in list_count and list_slots, and the
+    searches after each event read those lists instead of the cells (`_first_events_once`)."""
     n = pos.shape[0]
     rad, wmass = ti.static((Same(ti.cast(r_same, real)), Same(ti.cast(w_same, real))) if same else
                            (radius, inv_mass))
     horizon = ti.cast(t_end, real)
     vlim2 = ti.cast(vlim, real) ** 2
     reached = t_end
+    lists = ti.static((list_count, list_slots) if listed and at_start and serial and not two_level else ())
     if ti.static(at_start):
         _first_predictions(pos, vel, rad, STEP_START, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx,
                            ncy, rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my,
-                           r_cut, margin, real, periodic, two_level, serial, True)
+                           r_cut, margin, real, periodic, two_level, serial, True, lists, list_r2)
     else:
         _first_predictions(pos, vel, rad, tau, ids, ev_t, ev_p, stamp, cell_of, cell_start, sorted_ids, ncx, ncy,
                            rows, segs, box_w, box_h, horizon, coarse_start, coarse_ids, ncx_c, ncy_c, mx, my, r_cut,
-                           margin, real, periodic, two_level, serial, False)
+                           margin, real, periodic, two_level, serial, False, (), 0.0)
     # Buckets: one per `per_bucket` circles (QUEUE_BUCKET_CIRCLES when the head array was made),
     # and at most n, so that the loop below resets every one (the parts' calendars, which share
     # the array, take more of it).
@@ -262,7 +270,7 @@ def queue_step(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: ndar
                                   (pair_count, virial, wall_count, wall_impulse),
                                   (cell_of, cell_start, sorted_ids, coarse_start, coarse_ids),
                                   (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, ncx_c, ncy_c, mx, my, r_cut,
-                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, (), ())
+                                  margin, t_offset, box, vlim2, real, periodic, record, two_level, (), (), lists)
     # A top-level loop (one inside a branch would run on one thread); the largest speed of the
     # state it leaves in speed_out, and on one thread no event held (`_finish`), for the next step.
     _finish(pos, vel, tau, horizon, box_w, box_h, real, periodic, serial, speed_out, True,

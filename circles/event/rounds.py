@@ -44,7 +44,7 @@ def _predict(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau:
             t_i, p_i, unused, unused2 = _earliest(i, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, cell_of,
                                                   cell_start, sorted_ids, ncx, ncy, rows, segs, box, horizon, real,
                                                   periodic, cell_start, sorted_ids, 1, 1, 1, 1, 0.0, 0.0, False, (),
-                                                  0, 0, 0, 0, 0, 0.0, 1, 0, 0, ())
+                                                  0, 0, 0, 0, 0, 0.0, 1, 0, 0, (), ())
             ev_t[i] = t_i
             ev_p[i] = p_i
     if ti.static(clear_moved):

@@ -3,13 +3,18 @@ the ordering of events by key, and the move of every circle to the step's end.""
 import taichi as ti
 
 from .. import launch
-from ..geometry import forward_fits, key_less, NEVER, NO_EVENT, pairs_once
+from ..geometry import displacement, forward_fits, key_less, NEVER, NO_EVENT, pairs_once
 from ..reductions import offer_speed, speed_of, speed_result
 from .calendar import _queue_fix
 from .time_of_impact import event_key, own_values, pair_time
 from .two_level import _at, _run, _runs
 
 ndarr = ti.types.ndarray(ndim=1)
+
+#: Neighbours listed a circle at most (`_first_events_once`): in a dense fluid a circle has
+#: about 5 within a step's reach, so a list holds them several times over; a circle with
+#: more (a large one among small ones, a long step) searches its cells.
+LIST_SLOTS = 16
 
 
 @ti.func
@@ -18,7 +23,8 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
               cell_of: ti.template(), cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box,
               horizon, real: ti.template(), periodic: ti.template(), coarse_start: ti.template(),
               coarse_ids: ti.template(), ncx_c, ncy_c, mx, my, r_cut, margin, two_level: ti.template(),
-              queue: ti.template(), code, size, changed_a, changed_b, pend_at, scale, nb, off, hb, part: ti.template()):
+              queue: ti.template(), code, size, changed_a, changed_b, pend_at, scale, nb, off, hb, part: ti.template(),
+              lists: ti.template()):
     """Circle i's earliest event in (tau_i, horizon], chosen by the key
     (time, lo, hi) (`event_key`): with `full`, over its walls and all its neighbours; else its
     stored event compared with its pairs with the circles that moved (see `_predict`).
@@ -36,7 +42,9 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
     neighbours listed); without a queue, size comes back as given and none are listed. `off` and
     `hb`: where the queue starts in its arrays (`_queue_put`). `part`: () or (label, touched,
     dirty), when the circles are split into parts (`split_parts`): then only neighbours of i's
-    part are met, and a neighbour j in another part flags i touched and dirty and j dirty."""
+    part are met, and a neighbour j in another part flags i touched and dirty and j dirty.
+    `lists`: () or (count, slots) of `_first_events_once`: i's neighbours within the step's
+    reach, read in place of its cells when its list did not overflow (count >= 0)."""
     n = pos.shape[0]
     size_now = size
     pending = 0
@@ -54,45 +62,72 @@ def _earliest(i, full, pos: ti.template(), vel: ti.template(), radius: ti.templa
     c = cell_of[i]
     mine = _own_part(i, part)
     own = own_values(i, pos, vel, radius, tau)
-    runs, kx, ky = _runs(i, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
-    for r in range(runs):
-        k_lo, k_hi, coarse = _run(r, c, kx, ky, cell_start, coarse_start, ncx, ncy, segs, ncx_c, ncy_c, mx, my,
-                                  periodic, two_level)
-        for k in range(k_lo, k_hi):
-            j = _at(k, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
-            if ti.static(len(part) > 1):
-                if j >= 0 and _own_part(j, part) != mine:
-                    # A neighbour in another part: i's search is not complete past the window,
-                    # and i may have changed the pair (see `queue_parts`).
-                    part[1][i] = 1
-                    part[2][i] = 1
-                    part[2][j] = 1
-            if j >= 0 and j != i and _own_part(j, part) == mine and (full or moved[j] != 0):
-                if ti.static(len(queue) > 0):
-                    # First met in this event's searches: a neighbour whose event was with one of
-                    # the changed circles must search again (`queue_step`); the others take offers.
-                    if moved[j] < code:
-                        jp = ev_p[j]
-                        if jp == changed_a or jp == changed_b:
-                            moved[j] = code + 1
-                            queue[6][pend_at + pending] = j
-                            pending += 1
-                        else:
-                            moved[j] = code
-                # The same number as from j's side, bit for bit (`pair_time`).
-                t = pair_time(i, own, j, pos, vel, radius, tau, box, horizon, real, periodic)
-                if t <= horizon:
-                    # The key (creation ids, so that ties break the same whatever the memory
-                    # order), read only for the few pairs within the horizon.
-                    klo = ti.min(ids[i], ids[j])
-                    khi = ti.max(ids[i], ids[j])
-                    if key_less(t, klo, khi, best_t, best_lo, best_hi):
-                        best_t, best_lo, best_hi, best_p = t, klo, khi, j
-                    if ti.static(len(queue) > 0):
-                        if moved[j] == code:
-                            if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
-                                size_now = _queue_fix(j, size_now, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
+    listed = False
+    if ti.static(len(lists) > 0):
+        m = lists[0][i]
+        if m >= 0:
+            listed = True
+            for s in range(m):
+                j = lists[1][i * LIST_SLOTS + s]
+                best_t, best_lo, best_hi, best_p, size_now, pending = _meet(
+                    i, j, own, mine, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, box, horizon, real,
+                    periodic, queue, code, changed_a, changed_b, pend_at, scale, nb, off, hb, part, best_t, best_lo,
+                    best_hi, best_p, size_now, pending)
+    if not listed:
+        runs, kx, ky = _runs(i, radius, box, ncx, ncy, rows, segs, r_cut, margin, two_level)
+        for r in range(runs):
+            k_lo, k_hi, coarse = _run(r, c, kx, ky, cell_start, coarse_start, ncx, ncy, segs, ncx_c, ncy_c, mx, my,
+                                      periodic, two_level)
+            for k in range(k_lo, k_hi):
+                j = _at(k, coarse, sorted_ids, coarse_ids, radius, r_cut, two_level)
+                best_t, best_lo, best_hi, best_p, size_now, pending = _meet(
+                    i, j, own, mine, full, pos, vel, radius, tau, ids, ev_t, ev_p, moved, box, horizon, real,
+                    periodic, queue, code, changed_a, changed_b, pend_at, scale, nb, off, hb, part, best_t, best_lo,
+                    best_hi, best_p, size_now, pending)
     return best_t, best_p, size_now, pending
+
+
+@ti.func
+def _meet(i, j, own: ti.template(), mine, full, pos: ti.template(), vel: ti.template(), radius: ti.template(),
+          tau: ti.template(), ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), moved: ti.template(),
+          box, horizon, real: ti.template(), periodic: ti.template(), queue: ti.template(), code, changed_a, changed_b,
+          pend_at, scale, nb, off, hb, part: ti.template(), best_t, best_lo, best_hi, best_p, size_now, pending):
+    """Neighbour j (-1: none) met by circle i's search (`_earliest`, whose arguments these are):
+    returns the best (key, partner), the queue's size and the neighbours listed, updated."""
+    n = pos.shape[0]
+    if ti.static(len(part) > 1):
+        if j >= 0 and _own_part(j, part) != mine:
+            # A neighbour in another part: i's search is not complete past the window,
+            # and i may have changed the pair (see `queue_parts`).
+            part[1][i] = 1
+            part[2][i] = 1
+            part[2][j] = 1
+    if j >= 0 and j != i and _own_part(j, part) == mine and (full or moved[j] != 0):
+        if ti.static(len(queue) > 0):
+            # First met in this event's searches: a neighbour whose event was with one of
+            # the changed circles must search again (`queue_step`); the others take offers.
+            if moved[j] < code:
+                jp = ev_p[j]
+                if jp == changed_a or jp == changed_b:
+                    moved[j] = code + 1
+                    queue[6][pend_at + pending] = j
+                    pending += 1
+                else:
+                    moved[j] = code
+        # The same number as from j's side, bit for bit (`pair_time`).
+        t = pair_time(i, own, j, pos, vel, radius, tau, box, horizon, real, periodic)
+        if t <= horizon:
+            # The key (creation ids, so that ties break the same whatever the memory
+            # order), read only for the few pairs within the horizon.
+            klo = ti.min(ids[i], ids[j])
+            khi = ti.max(ids[i], ids[j])
+            if key_less(t, klo, khi, best_t, best_lo, best_hi):
+                best_t, best_lo, best_hi, best_p = t, klo, khi, j
+            if ti.static(len(queue) > 0):
+                if moved[j] == code:
+                    if _offer(j, i, t, klo, khi, ev_t, ev_p, ids, n):
+                        size_now = _queue_fix(j, size_now, scale, nb, queue, ev_t, ev_p, ids, n, off, hb)
+    return best_t, best_lo, best_hi, best_p, size_now, pending
 
 
 @ti.func
@@ -157,10 +192,34 @@ def _pair_once(i, j, a: ti.template()):
 
 
 @ti.func
+def _pair_listed(i, j, a: ti.template()):
+    """`_pair_once`, and the pair listed in both circles' neighbours (a[12], a[13]) when their
+    distance squared at the step's start is at most a[14] (`_first_events_once`)."""
+    _pair_once(i, j, a)
+    d = displacement(a[0][i], a[0][j], a[7], a[10])
+    if d.dot(d) <= a[14]:
+        _list_add(i, j, a[12], a[13])
+        _list_add(j, i, a[12], a[13])
+
+
+@ti.func
+def _list_add(i, j, count: ti.template(), slots: ti.template()):
+    """j into i's list of neighbours, or i's list marked overflowed (-1) when full."""
+    m = count[i]
+    if m >= 0:
+        if m < LIST_SLOTS:
+            slots[i * LIST_SLOTS + m] = j
+            count[i] = m + 1
+        else:
+            count[i] = -1
+
+
+@ti.func
 def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.template(), tau: ti.template(),
                        ids: ti.template(), ev_t: ti.template(), ev_p: ti.template(), cell_of: ti.template(),
                        cell_start: ti.template(), sorted_ids: ti.template(), ncx, ncy, rows, segs, box_w, box_h,
-                       horizon, real: ti.template(), periodic: ti.template(), fresh: ti.template()):
+                       horizon, real: ti.template(), periodic: ti.template(), fresh: ti.template(),
+                       lists: ti.template(), list_r2):
     """On one thread, every circle's earliest event, as `_earliest` in full would find it, with
     each pair's time of impact computed once, not once from each circle: every circle takes
     its walls, then each pair is offered to both circles from the forward half of one circle's
@@ -169,9 +228,19 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
     one thread leaves it), and takes its walls as the pairs' loop visits it
     (`_merge_wall_event`), after the offers of the circles before it, in one pass instead of two.
 
+    With `lists` (count, slots), each circle's neighbours within distance sqrt(list_r2) at the
+    step's start are listed as the pairs are visited, at most LIST_SLOTS a circle (count -1 when
+    more: its searches read its cells). Every pair that can meet within the step is that close
+    (the grid's reach), so a search of the list meets the pairs that a search of the cells would
+    and skips the cells' other circles, which cannot meet before the horizon.
+
     (On several threads the offers of two threads could meet at one circle; there each circle
     searches all its cells, `queue_step`.)"""
     n = pos.shape[0]
+    if ti.static(len(lists) > 0):
+        ti.loop_config(serialize=True)
+        for i in range(n):
+            lists[0][i] = 0
     if ti.static(not fresh):
         ti.loop_config(serialize=True)
         for i in range(n):
@@ -184,9 +253,15 @@ def _first_events_once(pos: ti.template(), vel: ti.template(), radius: ti.templa
         i = sorted_ids[own]
         if ti.static(fresh):
             _merge_wall_event(i, pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic)
-        pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic, _pair_once,
-                   (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic,
-                    own_values(i, pos, vel, radius, tau)))
+        if ti.static(len(lists) > 0):
+            pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic,
+                       _pair_listed, (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic,
+                                      own_values(i, pos, vel, radius, tau), lists[0], lists[1],
+                                      ti.cast(list_r2, real)))
+        else:
+            pairs_once(own, i, cell_of[i], forward, cell_start, sorted_ids, ncx, ncy, rows, segs, periodic,
+                       _pair_once, (pos, vel, radius, tau, ids, ev_t, ev_p, box, horizon, real, periodic,
+                                    own_values(i, pos, vel, radius, tau)))
 
 
 @ti.func

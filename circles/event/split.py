@@ -424,7 +424,7 @@ def queue_parts(pos: ndarr, vel: ndarr, radius: ndarr, inv_mass: ndarr, tau: nda
                                          (cell_of, cell_start, sorted_ids, cell_start, sorted_ids),
                                          (counters, log_t, log_i, log_j), ncx, ncy, rows, segs, 1, 1, 1, 1, 0.0,
                                          0.0, t_offset, box, vlim2, real, periodic, record, False,
-                                         (label, touched, dirty), (sum_i, sum_s, sum_at, sum_chunk))
+                                         (label, touched, dirty), (sum_i, sum_s, sum_at, sum_chunk), ())
                 result[k] = reached
                 if until >= t_end and reached >= t_end:
                     for q in range(s_lo, items):

@@ -17,6 +17,7 @@ from ..geometry import NEVER, NO_EVENT, spans
 from ..grid import count_parts
 from ..stepper import Stepper, like
 from . import queue, search, split, two_level
+from .search import LIST_SLOTS
 from . import rounds as parallel_rounds
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
@@ -46,6 +47,9 @@ PART_CLAIMS = 4
 #: The split's links (`event.split_parts`) reach this many units in the last place of the
 #: largest coordinate further, against the round-off of the positions within a window.
 LINK_ALLOWANCE_ULPS = 16
+#: The neighbour lists of one queue (`_list_r2`) reach this many units in the last place of
+#: the largest coordinate further than the step's reach.
+LIST_ALLOWANCE_ULPS = 64
 #: The arrays of a circle's state that the parts of an event step back up at its start (the
 #: clocks aside, 0 then), in the order event.queue_parts takes them; the counts and sums are not
 #: changed until the step is done (its events write to a sum log, `event.apply_sums`).
@@ -109,6 +113,9 @@ class EventStepper(Stepper):
     ARRAY_BYTES = {"f32": 129, "f64": 165}
     #: Bytes per circle more when a step is split into parts.
     PART_BYTES = {"f32": 41, "f64": 57}
+    #: Bytes per circle more for the lists of neighbours of one queue on one thread: a count and
+    #: LIST_SLOTS entries.
+    LIST_BYTES = 4 * (1 + LIST_SLOTS)
     #: Collisions are events at known times: this scheme can log them.
     LOGS_EVENTS = True
     #: The counters of work that copies carry: the rounds (one queue counts one a step), bound
@@ -132,6 +139,13 @@ class EventStepper(Stepper):
         queue, which is known only after the radii are drawn)."""
         return cls.uses_queue() and not serial_loops(n, "event") and count_parts() >= 1
 
+    @classmethod
+    def lists_neighbours(cls, n):
+        """Whether a CPU simulation of n circles lists each circle's neighbours at a step's start:
+        one queue whose loops run on one thread (counted also where a spread of radii will give
+        a two-level grid, which searches cells, known only after the radii are drawn)."""
+        return cls.uses_queue() and serial_loops(n, "event")
+
     @staticmethod
     def uses_queue():
         """Whether steps run from one queue of events (on a CPU) rather than in rounds."""
@@ -152,6 +166,7 @@ class EventStepper(Stepper):
         # Steps whose parts filled the sum log, and ran from one queue (`_sum_log_full`).
         self.sum_log_full = 0
         self._event_queue = self.uses_queue()
+        self._reach = 0.0  # the grid's reach of the step under way (`step`)
         # A step's two scalars on the device: the earliest event time of a round, and the time
         # of a collision that would outrun the grid (NEVER when none).
         self._scalars = ti.ndarray(sim._real, shape=2)
@@ -179,6 +194,12 @@ class EventStepper(Stepper):
         if self._parts:
             buckets = n // self._per_bucket + MOST_PARTS + 1
         self._head = ti.ndarray(ti.i32, shape=buckets)
+        # One queue on one thread with one grid level lists each circle's neighbours within the
+        # step's reach as it first predicts, and searches those lists after each event
+        # (`search._first_events_once`); the other paths search cells.
+        self._listed = self._event_queue and sim._serial and not sim._two_level
+        self._lists = (ti.ndarray(ti.i32, shape=n if self._listed else 1),
+                       ti.ndarray(ti.i32, shape=n * LIST_SLOTS if self._listed else 1))
         if not self._parts:
             return
         self._label = ti.ndarray(ti.i32, shape=n)
@@ -194,6 +215,14 @@ class EventStepper(Stepper):
         self._dirty_w = ti.ndarray(ti.i32, shape=n)
         # The split's absolute allowance on links, against round-off in the window's positions.
         self._link_allowance = LINK_ALLOWANCE_ULPS * float(np.finfo(sim._np_real).eps) * max(sim.box)
+
+    def _list_r2(self):
+        """The squared distance within which the first predictions list a circle's neighbours:
+        the step's reach, with a margin over the round-off of the positions (a longer list
+        costs a little; a shorter one would miss a pair)."""
+        sim = self.sim
+        margin = LIST_ALLOWANCE_ULPS * float(np.finfo(sim._np_real).eps) * max(sim.box)
+        return (self._reach * (1.0 + 1e-9) + margin) ** 2
 
     def _same_args(self):
         """(radius, inverse mass) of `_same_circles`, or zeros (unread) for circles of several,
@@ -279,6 +308,7 @@ class EventStepper(Stepper):
             if reach > limit:
                 h = (limit - 2.0 * sim._rmax) / (2.0 * vlim)
                 reach = limit
+        self._reach = reach
         if sim._two_level:
             self._build_two_levels(2.0 * vlim * h)
         else:
@@ -387,8 +417,9 @@ class EventStepper(Stepper):
                                    sim.wall_impulse,
                                    *g, w, hgt, h, vlim, sim._time, sim._counters, sim._log_t, sim._log_i,
                                    sim._log_j, sim._speed_out, *levels, most_events(sim.n),
-                                   self._per_bucket, *self._same_args(), real, periodic, record, two,
-                                   sim._serial, at_start, sim._same is not None)
+                                   self._per_bucket, *self._same_args(), *self._lists, self._list_r2(),
+                                   real, periodic, record, two, sim._serial, at_start, sim._same is not None,
+                                   self._listed)
         self.rounds += 1
         # queue_step's finish left the largest speed in _speed_out; its return synchronised.
         sim._known_speed = reductions.speed_in(sim._speed_view)
