@@ -1,12 +1,12 @@
 """Collisions per second of dense disks against the event step's length, side by side in one process.
 
     python bench/diagnostics/dense_step.py [--n 870] [--fraction 0.698] [--dts 0.15 default]
-                                           [--rounds 6] [--span 20] [--threads 1]
+                                           [--rounds 6] [--span 20] [--threads 1] [--warm 20]
 
 bench/dense.py's scene (equal disks from a triangular crystal in a periodic box, speeds 1 at
 the start, f64), once per step length: "default" is the scene's own (the event scheme's
 collision bound, `EVENT_STEP_COLLISIONS`), 0.15 the radii's step alone (0.3 mean radii for the
-fastest start speed, 1). Each copy warms up for 20 time units; then each round runs every
+fastest start speed, 1). Each copy warms up for `--warm` time units (20); then each round runs every
 copy in turn for `--span` time units, the order reversed every other round, so that a shared
 machine's load falls on all alike. Reported per dt: pair collisions per second, median
 [min, max] over the rounds, and its ratio to the first dt's, median over the rounds.
@@ -27,6 +27,7 @@ def main():
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--span", type=float, default=20.0)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--warm", type=float, default=20.0, help="time units each copy runs first (default 20)")
     args = ap.parse_args()
     circles.init(arch="cpu", cpu_max_num_threads=args.threads)
     nx = 29 if args.n == 870 else math.isqrt(args.n)
@@ -39,7 +40,7 @@ def main():
         sim = circles.Simulation(scene)
         if dt != "default":
             sim.dt = float(dt)
-        sim.advance(20.0)
+        sim.advance(args.warm)
         sims.append(sim)
     rates = [[] for _ in sims]
     for r in range(args.rounds):

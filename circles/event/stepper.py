@@ -33,7 +33,7 @@ EVENT_STEP_RADII = 0.3
 #: times while the fastest moves a radius: there a step's cells would hold many circles that
 #: every collision searches, and a shorter step with smaller cells costs less (the
 #: Performance page of the docs). A dilute scene's step is the radii's.
-EVENT_STEP_COLLISIONS = 0.75
+EVENT_STEP_COLLISIONS = 1.1
 
 #: The event scheme on a CPU runs each step from one queue of events (`event.queue_step`): the
 #: same events, in the same order, with the same arithmetic as the parallel rounds a GPU runs,
