@@ -8,7 +8,7 @@ Writes FOLDER/<machine>/dense.md, dense.csv and dense.png (default FOLDER: outpu
 - the same on one thread at 0.45 and 0.70 for N from 1024 to 1e6 (the plot);
 - the figure of merit of the pressure at N = 870, 0.698, one thread: the standard error of
   beta P d^2 times the square root of the CPU seconds of the measurement, and the CPU seconds
-  that a standard error of 0.01 takes.
+  that a standard error of 0.01 takes, pooled over independent runs.
 
 Every scene: radius 0.5, mass 1, all speeds 1 at the start, a periodic box that fits a
 triangular crystal of nx columns and ny rows, started from that crystal, f64, default dt. Each
@@ -40,9 +40,11 @@ WARM_COLLISIONS = 20.0
 MEASURE_COLLISIONS = 10.0
 LEAST_WARM_PAIRS = 2e6
 LEAST_MEASURED_PAIRS = 5e6
-#: The figure of merit's run: equilibration and measurement in time units, in blocks.
-MERIT = dict(n=870, fraction=0.698, equilibrate=2000.0, measure=20000.0, block=1000.0)
-QUICK_MERIT = dict(n=870, fraction=0.698, equilibrate=500.0, measure=4000.0, block=250.0)
+#: The figure of merit's runs: equilibration and measurement in time units, in blocks, and
+#: independent repeats (seeds 1, 2, ...), whose standard errors are pooled: one run's estimate
+#: from its blocks is itself uncertain by about a quarter.
+MERIT = dict(n=870, fraction=0.698, equilibrate=2000.0, measure=20000.0, block=2000.0, repeats=4)
+QUICK_MERIT = dict(n=870, fraction=0.698, equilibrate=500.0, measure=4000.0, block=500.0, repeats=2)
 
 
 def scene(circles, n, fraction):
@@ -74,14 +76,16 @@ def run_rate(n, fraction, threads, scale):
                 collisions_per_cpu_s=pairs / cpu)
 
 
-def run_merit(cfg):
-    """The pressure's standard error against CPU seconds at N = 870, 0.698, one thread."""
-    import numpy as np
-
+def run_merit(cfg, seed):
+    """One run of the pressure's error against CPU seconds at N = 870, 0.698, one thread: the
+    block means of beta P d^2 over the measurement and its CPU seconds."""
     import circles
     from circles import observables
     circles.init(arch="cpu", cpu_max_num_threads=1)
-    sim = circles.Simulation(scene(circles, cfg["n"], cfg["fraction"]))
+    nx, ny = CRYSTALS[cfg["n"]]
+    sim = circles.Simulation(circles.Scene(n=cfg["n"], crystal=[nx, ny], area_fraction=cfg["fraction"], radius=0.5,
+                                           speed=[1.0, 1.0], mass="equal", boundary="periodic", start="crystal",
+                                           precision="f64", seed=seed))
     sim.advance(cfg["equilibrate"])
     blocks = int(round(cfg["measure"] / cfg["block"]))
     values, cpu, first = [], 0.0, sim.stats()
@@ -93,22 +97,25 @@ def run_merit(cfg):
         now = sim.stats()
         values.append(observables.interval(start, now, sim.n, sim.box, sim.boundary, 0.5, 1.0)["reduced_pressure"])
         start = now
-    values = np.array(values)
-    row = dict(n=cfg["n"], area_fraction=cfg["fraction"], threads=1, equilibrate=cfg["equilibrate"],
-               measure=cfg["measure"], cpu_s=cpu, collisions=now["pair_collisions"] - first["pair_collisions"],
-               mean=float(values.mean()))
-    # Standard errors from blocks of 1, 2 and 4 times the block: they agree when the blocks are
-    # longer than the pressure's correlation time.
-    for group in (1, 2, 4):
-        m = len(values) // group
-        means = values[: m * group].reshape(m, group).mean(axis=1)
-        se = float(means.std(ddof=1) / math.sqrt(m)) if m > 1 else float("nan")
-        row[f"se_blocks_{m}"] = se
-    se = row[f"se_blocks_{len(values) // 2}"]
-    row["se"] = se
-    row["merit"] = se * math.sqrt(cpu)
-    row["cpu_s_to_se_0_01"] = cpu * (se / 0.01) ** 2
-    return row
+    return dict(seed=seed, cpu_s=cpu, collisions=now["pair_collisions"] - first["pair_collisions"], blocks=values)
+
+
+def merit_row(cfg, runs):
+    """The repeats pooled: the standard error of one run's mean from its blocks, as the root mean
+    square over the repeats, beside the scatter of the repeats' means (the two agree when the
+    blocks are longer than the pressure's correlation time); the figure of merit SE x sqrt(CPU
+    s) of one run, and the CPU seconds to a standard error of 0.01."""
+    import numpy as np
+    means = np.array([np.mean(r["blocks"]) for r in runs])
+    ses = np.array([np.std(r["blocks"], ddof=1) / math.sqrt(len(r["blocks"])) for r in runs])
+    cpu = float(np.mean([r["cpu_s"] for r in runs]))
+    se = float(np.sqrt(np.mean(ses ** 2)))
+    return dict(n=cfg["n"], area_fraction=cfg["fraction"], threads=1, equilibrate=cfg["equilibrate"],
+                measure=cfg["measure"], block=cfg["block"], repeats=len(runs), cpu_s=cpu,
+                collisions=float(np.mean([r["collisions"] for r in runs])), mean=float(means.mean()),
+                se_of_mean=float(means.std(ddof=1) / math.sqrt(len(runs))), se=se,
+                se_each=" ".join(f"{x:.4f}" for x in ses), scatter_of_means=float(means.std(ddof=1)),
+                merit=se * math.sqrt(cpu), cpu_s_to_se_0_01=cpu * (se / 0.01) ** 2)
 
 
 def child(args):
@@ -118,7 +125,7 @@ def child(args):
         n, fraction, threads, scale = int(args[1]), float(args[2]), int(args[3]), float(args[4])
         print(json.dumps(run_rate(n, fraction, threads, scale)))
     else:
-        print(json.dumps(run_merit(json.loads(args[1]))))
+        print(json.dumps(run_merit(json.loads(args[1]), int(args[2]))))
 
 
 def in_process(*args):
@@ -172,12 +179,14 @@ def write(outdir, meta, threads, curve, merit):
         lines.append(f"| {r['n']} | {r['area_fraction']} | {r['dt']:.4g} | {si(r['collisions_per_s'])} |")
     if merit:
         m = merit
-        ses = ", ".join(f"{k[len('se_blocks_'):]} blocks {v:.4f}" for k, v in m.items() if k.startswith("se_blocks_"))
         lines += ["", "## The pressure's error against CPU time", "",
-                  f"N = {m['n']}, area fraction {m['area_fraction']}, one thread: {m['equilibrate']:g} time units of "
-                  f"equilibration, then {m['measure']:g} measured, {m['collisions']:.3g} pair collisions in "
-                  f"{m['cpu_s']:.1f} CPU s.", "",
-                  f"- beta P d^2 = {m['mean']:.4f}; standard error {ses} (the figure of merit takes the middle one)",
+                  f"N = {m['n']}, area fraction {m['area_fraction']}, one thread, from the crystal: {m['repeats']} "
+                  f"runs (seeds 1 to {m['repeats']}) of {m['equilibrate']:g} time units of equilibration, then "
+                  f"{m['measure']:g} measured in blocks of {m['block']:g}; a run made {m['collisions']:.3g} pair "
+                  f"collisions in {m['cpu_s']:.1f} CPU s of measurement (the mean over the runs).", "",
+                  f"- beta P d^2 = {m['mean']:.4f} +- {m['se_of_mean']:.4f} over the runs",
+                  f"- one run's standard error from its blocks: {m['se_each']}; pooled (root mean square) "
+                  f"{m['se']:.4f}; the scatter of the runs' means {m['scatter_of_means']:.4f}",
                   f"- figure of merit SE x sqrt(CPU s) = {m['merit']:.3f}",
                   f"- CPU seconds to a standard error of 0.01: {m['cpu_s_to_se_0_01']:.0f}"]
     with open(os.path.join(outdir, "dense.md"), "w") as f:
@@ -234,7 +243,8 @@ def main(argv=None):
                 r = in_process("rate", n, fraction, 1, scale)
                 curve.append(r)
                 log(f"N={n} eta={fraction}: {si(r['collisions_per_s'])} collisions/s, dt {r['dt']:.4g}")
-    merit = in_process("merit", json.dumps(QUICK_MERIT if args.quick else MERIT))
+    cfg = QUICK_MERIT if args.quick else MERIT
+    merit = merit_row(cfg, [in_process("merit", json.dumps(cfg), seed) for seed in range(1, cfg["repeats"] + 1)])
     log(f"merit: SE {merit['se']:.4f} in {merit['cpu_s']:.1f} CPU s: {merit['merit']:.3f}; "
         f"{merit['cpu_s_to_se_0_01']:.0f} CPU s to SE 0.01")
     meta["wall_s"] = time.perf_counter() - start
