@@ -1,6 +1,6 @@
 """Benchmark of circles: throughput, the memory-bandwidth bound, the pymunk peer, work-precision.
 
-    python bench/bench.py [--quick] [--arch cpu|gpu] [--out outputs/bench] [--skip SECTION,...]
+    python bench/bench.py [--quick] [--arch cpu|gpu] [--out outputs/bench] [--skip SECTION,...] [--ecmc PATH]
 
 Writes `<out>/<machine>/` (the machine is the CPU model, or the GPU name with --arch gpu):
 throughput.csv, bandwidth.csv, compile.csv, placement.csv, render.csv, memory.csv, spread.csv,
@@ -55,7 +55,8 @@ What is measured, all in one run and one process:
    its steps are the first to need (the extra rounds of long steps).
 5. Dense. bench/dense.py, in processes of its own: equal disks near melting (area fraction
    0.70), collisions per second on 1 and 2 threads and against N, and the pressure's error
-   against CPU time at N = 870 (dense.md, dense.csv, dense.png; see that script).
+   against CPU time at N = 870 (dense.md, dense.csv, dense.png; see that script); with
+   --ecmc PATH, event-chain Monte Carlo side by side (bench/peer_ecmc.py).
 """
 
 import argparse
@@ -863,7 +864,12 @@ def parse_args(argv=None):
                          f"--skip: {QUICK_OUT})")
     ap.add_argument("--skip", default="", help=f"comma list of sections to skip: {','.join(SECTIONS)} (default: "
                     f"none); writes to {QUICK_OUT} unless --out is given")
+    ap.add_argument("--ecmc", default=None, help="the dense section's peer: the StraightEcmc program of Li et al. "
+                    "2022, built by you (see bench/peer_ecmc.py)")
     args = ap.parse_args(argv)
+    if args.ecmc is not None and not (os.path.isfile(args.ecmc) and os.access(args.ecmc, os.X_OK)):
+        ap.error(f"--ecmc {args.ecmc}: no such program; give the path of StraightEcmc as built from CPP/StraightECMC "
+                 "(see bench/peer_ecmc.py)")
     args.skip = set(filter(None, (name.strip() for name in args.skip.split(","))))
     unknown = sorted(args.skip - set(SECTIONS))
     if unknown:
@@ -1077,7 +1083,7 @@ def main(argv=None):
         # Dense disks near melting (bench/dense.py), a process a row: its own threads.
         log("dense")
         dense = [sys.executable, os.path.join(os.path.dirname(os.path.abspath(__file__)), "dense.py"), "--out",
-                 args.out] + (["--quick"] if args.quick else [])
+                 args.out] + (["--quick"] if args.quick else []) + (["--ecmc", args.ecmc] if args.ecmc else [])
         if subprocess.run(dense).returncode != 0:
             errors.append("dense: bench/dense.py failed (its output above)")
     log("targets")

@@ -1,6 +1,6 @@
 """The benchmark's dense section: equal hard disks near melting, where collisions are many.
 
-    python bench/dense.py [--out FOLDER] [--quick]
+    python bench/dense.py [--out FOLDER] [--quick] [--ecmc PATH [--ecmc-length 8]]
 
 Writes FOLDER/<machine>/dense.md, dense.csv and dense.png (default FOLDER: outputs/bench):
 - pair collisions per second of the event scheme at area fraction 0.70 (0.698 at N = 870, the
@@ -8,7 +8,9 @@ Writes FOLDER/<machine>/dense.md, dense.csv and dense.png (default FOLDER: outpu
 - the same on one thread at 0.45 and 0.70 for N from 1024 to 1e6 (the plot);
 - the figure of merit of the pressure at N = 870, 0.698, one thread: the standard error of
   beta P d^2 times the square root of the CPU seconds of the measurement, and the CPU seconds
-  that a standard error of 0.01 takes, pooled over independent runs.
+  that a standard error of 0.01 takes, pooled over independent runs;
+- with `--ecmc PATH`, the same for event-chain Monte Carlo on the same disks in the same box,
+  in the same run: Li et al.'s program, built by the user (bench/peer_ecmc.py).
 
 Every scene: radius 0.5, mass 1, all speeds 1 at the start, a periodic box that fits a
 triangular crystal of nx columns and ny rows, started from that crystal, f64, default dt. Each
@@ -142,10 +144,12 @@ def si(v):
     return f"{v / 1e6:.3g} M"
 
 
-def write(outdir, meta, threads, curve, merit):
+def write(outdir, meta, threads, curve, merit, peer=None):
     rows = [dict(table="threads", **r) for r in threads] + [dict(table="curve", **r) for r in curve]
     if merit:
         rows.append(dict(table="merit", **merit))
+    if peer:
+        rows.append(dict(table="peer", **peer))
     keys = []
     for r in rows:
         keys += [k for k in r if k not in keys]
@@ -189,6 +193,21 @@ def write(outdir, meta, threads, curve, merit):
                   f"{m['se']:.4f}; the scatter of the runs' means {m['scatter_of_means']:.4f}",
                   f"- figure of merit SE x sqrt(CPU s) = {m['merit']:.3f}",
                   f"- CPU seconds to a standard error of 0.01: {m['cpu_s_to_se_0_01']:.0f}"]
+    if merit and peer:
+        p, m = peer, merit
+        lines += ["", "## Event-chain Monte Carlo, side by side", "",
+                  f"{p['peer']}, the same {p['n']} disks at {p['area_fraction']} in the same box, from the crystal, "
+                  f"one thread, length factor {p['length']}: {p['events']:.3g} chain events in {p['cpu_s']:.1f} CPU s "
+                  f"({p['events_per_cpu_s'] / 1e6:.3g} M a second); its pressure sampled 1000 times, the first 20% "
+                  "dropped, the standard error from 10 blocks of the rest (bench/peer_ecmc.py).", "",
+                  "| program | beta P d^2 | standard error | CPU s measured | SE x sqrt(CPU s) | CPU s to SE 0.01 |",
+                  "|---|---|---|---|---|---|",
+                  f"| circles (event-driven MD) | {m['mean']:.4f} | {m['se']:.4f} | {m['cpu_s']:.1f} | {m['merit']:.3f} | "
+                  f"{m['cpu_s_to_se_0_01']:.0f} |",
+                  f"| event-chain Monte Carlo | {p['mean']:.4f} | {p['se']:.4f} | {p['cpu_s_measured']:.1f} | "
+                  f"{p['merit']:.3f} | {p['cpu_s_to_se_0_01']:.0f} |", "",
+                  f"circles takes {m['cpu_s_to_se_0_01'] / p['cpu_s_to_se_0_01']:.2f} times the CPU seconds of "
+                  "event-chain Monte Carlo to the same standard error."]
     with open(os.path.join(outdir, "dense.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
 
@@ -220,7 +239,18 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join("outputs", "bench"), help="folder of the results")
     ap.add_argument("--quick", action="store_true", help="shorter runs, no 1e6 rows")
+    ap.add_argument("--ecmc", default=None, help="the StraightEcmc program of Li et al. 2022, built by you "
+                    "(bench/peer_ecmc.py), run side by side at N = 870, 0.698")
+    ap.add_argument("--ecmc-length", type=int, default=8, help="its length factor (default 8: about 1.6e9 events)")
     args = ap.parse_args(argv)
+    if args.ecmc is not None and not (os.path.isfile(args.ecmc) and os.access(args.ecmc, os.X_OK)):
+        ap.error(f"--ecmc {args.ecmc}: no such program; give the path of StraightEcmc as built from "
+                 "CPP/StraightECMC (see bench/peer_ecmc.py)")
+    if args.ecmc is not None:
+        try:
+            import h5py  # noqa: F401  (reads the peer's output)
+        except ImportError:
+            ap.error("--ecmc needs h5py to read the program's output: pip install h5py")
     from bench import cpu_model, slug
     machine = cpu_model()
     outdir = os.path.join(args.out, slug(machine))
@@ -247,8 +277,14 @@ def main(argv=None):
     merit = merit_row(cfg, [in_process("merit", json.dumps(cfg), seed) for seed in range(1, cfg["repeats"] + 1)])
     log(f"merit: SE {merit['se']:.4f} in {merit['cpu_s']:.1f} CPU s: {merit['merit']:.3f}; "
         f"{merit['cpu_s_to_se_0_01']:.0f} CPU s to SE 0.01")
+    peer = None
+    if args.ecmc:
+        import peer_ecmc
+        peer = peer_ecmc.run(args.ecmc, *CRYSTALS[cfg["n"]], cfg["fraction"], args.ecmc_length)
+        log(f"event-chain Monte Carlo: SE {peer['se']:.4f} in {peer['cpu_s_measured']:.1f} CPU s: "
+            f"{peer['merit']:.3f}; {peer['cpu_s_to_se_0_01']:.0f} CPU s to SE 0.01")
     meta["wall_s"] = time.perf_counter() - start
-    write(outdir, meta, threads, curve, merit)
+    write(outdir, meta, threads, curve, merit, peer)
     plot(outdir, curve)
     log(f"wrote {outdir}/dense.md, dense.csv, dense.png")
 
