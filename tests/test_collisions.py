@@ -703,6 +703,11 @@ def test_a_dense_scenes_event_step_holds_about_one_collision_a_circle(circles_cp
     # A dilute scene keeps the radii's step.
     dilute = circles_cpu.Scene(n=1000, area_fraction=0.3, radius=0.5, speed=[1.0, 1.0], seed=2)
     assert circles_cpu.Simulation(dilute).dt == pytest.approx(0.15, rel=1e-12)
+    # From 500000 circles, where every thread count runs steps in parts, 0.33 collisions a step.
+    large = circles_cpu.backend.EVENT_PARTS_ONE_THREAD_N
+    assert (large, stepper.EVENT_STEP_COLLISIONS_LARGE) == (500_000, 0.33)
+    for n, most in ((large - 1, 1.1), (large, 0.33)):
+        assert stepper.EventStepper.default_dt(np.full(n, 0.5), 1.0, omega) == pytest.approx(most / omega, rel=1e-12)
 
 
 @pytest.mark.parametrize("mass", [[1.0, 100.0], "equal"])
