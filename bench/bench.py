@@ -80,6 +80,7 @@ import taichi as ti
 import circles
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import peer_ecmc  # noqa: E402
 import targets  # noqa: E402
 try:
     import peer_pymunk  # noqa: E402
@@ -867,9 +868,8 @@ def parse_args(argv=None):
     ap.add_argument("--ecmc", default=None, help="the dense section's peer: the StraightEcmc program of Li et al. "
                     "2022, built by you (see bench/peer_ecmc.py)")
     args = ap.parse_args(argv)
-    if args.ecmc is not None and not (os.path.isfile(args.ecmc) and os.access(args.ecmc, os.X_OK)):
-        ap.error(f"--ecmc {args.ecmc}: no such program; give the path of StraightEcmc as built from CPP/StraightECMC "
-                 "(see bench/peer_ecmc.py)")
+    if args.ecmc is not None and peer_ecmc.missing(args.ecmc):
+        ap.error(peer_ecmc.missing(args.ecmc))
     args.skip = set(filter(None, (name.strip() for name in args.skip.split(","))))
     unknown = sorted(args.skip - set(SECTIONS))
     if unknown:

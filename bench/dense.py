@@ -29,8 +29,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-#: (N, crystal columns, rows): the melting sweep's box, then near-square boxes.
-CRYSTALS = {870: (29, 30), 1024: (32, 32), 16384: (128, 128), 262144: (512, 512), 1_000_000: (1000, 1000)}
+#: N = 870: the melting sweep's crystal of 29 columns and 30 rows; other N: square crystals.
+MELTING_N, MELTING_CRYSTAL = 870, (29, 30)
 #: The rows of the thread table: (N, area fraction).
 THREAD_ROWS = ((870, 0.698), (16384, 0.70), (1_000_000, 0.70))
 #: The plot's sizes, at each of its area fractions, on one thread.
@@ -49,10 +49,24 @@ MERIT = dict(n=870, fraction=0.698, equilibrate=2000.0, measure=20000.0, block=2
 QUICK_MERIT = dict(n=870, fraction=0.698, equilibrate=500.0, measure=4000.0, block=500.0, repeats=2)
 
 
-def scene(circles, n, fraction):
-    nx, ny = CRYSTALS[n]
+def crystal_of(n):
+    """(columns, rows) of the crystal of n disks: the melting sweep's for 870, else nx by nx,
+    for n the square of an even nx (a periodic triangular crystal has an even number of rows)."""
+    if n == MELTING_N:
+        return MELTING_CRYSTAL
+    nx = math.isqrt(n)
+    if nx * nx != n or nx % 2:
+        raise ValueError(f"n = {n}: give {MELTING_N} or the square of an even number (a crystal of nx by nx rows)")
+    return nx, nx
+
+
+def scene(circles, n, fraction, seed=1, scheme="event"):
+    """The dense section's scene in the package `circles` (an older engine's, for versus.py):
+    n equal disks from their crystal, in the periodic box that fits it, speeds 1, f64."""
+    nx, ny = crystal_of(n)
     return circles.Scene(n=n, crystal=[nx, ny], area_fraction=fraction, radius=0.5, speed=[1.0, 1.0],
-                         mass="equal", boundary="periodic", start="crystal", precision="f64", seed=1)
+                         mass="equal", boundary="periodic", start="crystal", precision="f64", seed=seed,
+                         scheme=scheme)
 
 
 def run_rate(n, fraction, threads, scale):
@@ -84,10 +98,7 @@ def run_merit(cfg, seed):
     import circles
     from circles import observables
     circles.init(arch="cpu", cpu_max_num_threads=1)
-    nx, ny = CRYSTALS[cfg["n"]]
-    sim = circles.Simulation(circles.Scene(n=cfg["n"], crystal=[nx, ny], area_fraction=cfg["fraction"], radius=0.5,
-                                           speed=[1.0, 1.0], mass="equal", boundary="periodic", start="crystal",
-                                           precision="f64", seed=seed))
+    sim = circles.Simulation(scene(circles, cfg["n"], cfg["fraction"], seed))
     sim.advance(cfg["equilibrate"])
     blocks = int(round(cfg["measure"] / cfg["block"]))
     values, cpu, first = [], 0.0, sim.stats()
@@ -243,10 +254,10 @@ def main(argv=None):
                     "(bench/peer_ecmc.py), run side by side at N = 870, 0.698")
     ap.add_argument("--ecmc-length", type=int, default=8, help="its length factor (default 8: about 1.6e9 events)")
     args = ap.parse_args(argv)
-    if args.ecmc is not None and not (os.path.isfile(args.ecmc) and os.access(args.ecmc, os.X_OK)):
-        ap.error(f"--ecmc {args.ecmc}: no such program; give the path of StraightEcmc as built from "
-                 "CPP/StraightECMC (see bench/peer_ecmc.py)")
     if args.ecmc is not None:
+        import peer_ecmc
+        if peer_ecmc.missing(args.ecmc):
+            ap.error(peer_ecmc.missing(args.ecmc))
         try:
             import h5py  # noqa: F401  (reads the peer's output)
         except ImportError:
@@ -280,7 +291,7 @@ def main(argv=None):
     peer = None
     if args.ecmc:
         import peer_ecmc
-        peer = peer_ecmc.run(args.ecmc, *CRYSTALS[cfg["n"]], cfg["fraction"], args.ecmc_length)
+        peer = peer_ecmc.run(args.ecmc, *crystal_of(cfg["n"]), cfg["fraction"], args.ecmc_length)
         log(f"event-chain Monte Carlo: SE {peer['se']:.4f} in {peer['cpu_s_measured']:.1f} CPU s: "
             f"{peer['merit']:.3f}; {peer['cpu_s_to_se_0_01']:.0f} CPU s to SE 0.01")
     meta["wall_s"] = time.perf_counter() - start

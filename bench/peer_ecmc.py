@@ -34,13 +34,20 @@ BLOCKS = 10
 TO_REDUCED = 2.0 / math.sqrt(3.0)
 
 
+def missing(path):
+    """Why `path` cannot run as the peer (the words of an --ecmc error), or None when it can."""
+    if os.path.isfile(path) and os.access(path, os.X_OK):
+        return None
+    return (f"--ecmc {path}: no such program; give the path of StraightEcmc as built from CPP/StraightECMC "
+            "(see bench/peer_ecmc.py)")
+
+
 def run(path, nx, ny, eta, length):
     """Run the program; returns a dict of its pressure, standard error and CPU seconds."""
     import h5py
     import numpy as np
-    if not (os.path.isfile(path) and os.access(path, os.X_OK)):
-        raise FileNotFoundError(f"--ecmc {path}: no such program; give the path of StraightEcmc as built from "
-                                "CPP/StraightECMC (see bench/peer_ecmc.py)")
+    if missing(path):
+        raise FileNotFoundError(missing(path))
     with tempfile.TemporaryDirectory() as scratch:
         out = os.path.join(scratch, "ecmc.h5")
         before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -8,7 +8,6 @@ import taichi as ti
 from circles import cli
 from circles import memory as simulation_module
 from circles.backend import serial_loops
-from circles.grid import count_parts
 from circles.memory import (ARRAY_BYTES, LOG_BYTES, MOST_RECORDED, PART_BYTES, NotEnoughMemory,
                             available_memory, bytes_per_circle, check_memory)
 from conftest import TEST_ARCH
@@ -56,7 +55,7 @@ def test_a_queue_in_parts_counts_its_arrays(circles_cpu):
     circle more, and the memory check counts them (it counted ARRAY_BYTES alone, so a scene
     needing 28.5 MB was let into 22.5)."""
     n = 150_000
-    split = TEST_ARCH == "cpu" and not serial_loops(n, "event") and count_parts() >= 1
+    split = TEST_ARCH == "cpu" and not serial_loops(n, "event")
     per = ARRAY_BYTES[("event", "f32")] + (PART_BYTES["f32"] if split else 0)
     check_memory(n, "event", "f32", available=per * n)
     with pytest.raises(NotEnoughMemory, match=f"{per} bytes a circle"):

@@ -12,17 +12,18 @@ step lengths, the cost a step pays whatever its collisions (the fixed cost) and 
 each collision: t(step) = fixed + per collision x collisions, solved from the two.
 """
 import argparse
-import math
+import os
+import sys
 import time
 
 import circles
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from dense import scene  # bench/dense.py's scene, after the path above
+
 
 def run(n, fraction, threads, dt_factor, warm, span):
-    nx = 29 if n == 870 else math.isqrt(n)
-    scene = circles.Scene(n=n, crystal=[nx, n // nx], area_fraction=fraction, radius=0.5, speed=[1.0, 1.0],
-                          mass="equal", boundary="periodic", start="crystal", seed=1)
-    sim = circles.Simulation(scene)
+    sim = circles.Simulation(scene(circles, n, fraction))
     sim.dt = sim.dt * dt_factor
     sim.advance(warm)
     from circles.event import queue, split

@@ -12,11 +12,15 @@ machine's load falls on all alike. Reported per dt: pair collisions per second, 
 [min, max] over the rounds, and its ratio to the first dt's, median over the rounds.
 """
 import argparse
-import math
+import os
 import statistics
+import sys
 import time
 
 import circles
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from dense import crystal_of, scene  # bench/dense.py's scene, after the path above
 
 
 def main():
@@ -30,14 +34,13 @@ def main():
     ap.add_argument("--warm", type=float, default=20.0, help="time units each copy runs first (default 20)")
     args = ap.parse_args()
     circles.init(arch="cpu", cpu_max_num_threads=args.threads)
-    nx = 29 if args.n == 870 else math.isqrt(args.n)
-    if args.n % nx or (args.n // nx) % 2:
-        ap.error(f"--n {args.n}: give 870 or the square of an even number (a crystal of nx by nx rows)")
+    try:
+        crystal_of(args.n)
+    except ValueError as e:
+        ap.error(f"--n: {e}")
     sims = []
     for dt in args.dts:
-        scene = circles.Scene(n=args.n, crystal=[nx, args.n // nx], area_fraction=args.fraction, radius=0.5,
-                              speed=[1.0, 1.0], mass="equal", boundary="periodic", start="crystal", seed=1)
-        sim = circles.Simulation(scene)
+        sim = circles.Simulation(scene(circles, args.n, args.fraction))
         if dt != "default":
             sim.dt = float(dt)
         sim.advance(args.warm)

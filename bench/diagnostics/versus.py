@@ -70,7 +70,7 @@ print(json.dumps({"times": times.tolist(), "pairs": int(pairs), "energy_change":
 
 #: Both engines in one process, stepped in turn (`--interleave`).
 PAIRED = """
-import json, sys, time
+import json, os, sys, time
 import taichi as ti
 n, scheme, steps = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 sys.path.insert(0, sys.argv[4])
@@ -82,10 +82,9 @@ circles_base.backend._state.update(initialized=True, arch=circles.backend.curren
 sims = {}
 for name, pkg in (("base", circles_base), ("this", circles)):
     if sys.argv[9] == "dense":  # bench/dense.py's scene: equal disks from a crystal near melting
-        nx = 29 if n == 870 else int(round(n ** 0.5))
-        sims[name] = pkg.Simulation(pkg.Scene(n=n, crystal=[nx, n // nx], area_fraction=0.698 if n == 870 else 0.70,
-                                              radius=0.5, speed=[1.0, 1.0], mass="equal", boundary="periodic",
-                                              start="crystal", precision="f64", scheme=scheme, seed=1))
+        sys.path.insert(0, os.path.dirname(sys.argv[4]))
+        from dense import scene as dense_scene
+        sims[name] = pkg.Simulation(dense_scene(pkg, n, 0.698 if n == 870 else 0.70, scheme=scheme))
         sims[name].step(int(sys.argv[7]))
         continue
     scene = bench_scene(n, scheme, seed=1)

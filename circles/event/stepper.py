@@ -17,8 +17,8 @@ from ..geometry import NEVER, NO_EVENT, spans
 from ..grid import count_parts
 from ..stepper import Stepper, like
 from . import queue, search, split, two_level
-from .search import LIST_SLOTS
 from . import rounds as parallel_rounds
+from .search import LIST_SLOTS
 
 #: Speeds may grow by this factor within an event step before the step is cut short. The grid's
 #: cells, and the clusters a split into parts must keep whole, grow with it; a step cut short
@@ -141,10 +141,11 @@ class EventStepper(Stepper):
 
     @classmethod
     def splits_into_parts(cls, n):
-        """Whether a CPU simulation of n circles may split its steps into parts: one queue on
-        several threads, or at least EVENT_PARTS_ONE_THREAD_N circles on one (counted also where a spread of radii will give a two-level grid and one
+        """Whether a CPU simulation of n circles may split its steps into parts: where its loops
+        do not run as one serial loop (several threads, or at least EVENT_PARTS_ONE_THREAD_N
+        circles on one; counted also where a spread of radii will give a two-level grid and one
         queue, which is known only after the radii are drawn)."""
-        return cls.uses_queue() and not serial_loops(n, "event") and count_parts() >= 1
+        return cls.uses_queue() and not serial_loops(n, "event")
 
     @classmethod
     def lists_neighbours(cls, n):
@@ -189,7 +190,7 @@ class EventStepper(Stepper):
         (`split.split_parts`): on a CPU, with one grid level, when the step's loops do not run
         as one serial loop (`backend.serial_loops`: several threads, or a large scene on one)."""
         sim = self.sim
-        self._parts = self._event_queue and not sim._serial and not sim._two_level and count_parts() >= 1
+        self._parts = self._event_queue and not sim._serial and not sim._two_level
         self._split_wait = 0  # steps left before a split is tried again after one failed
         self._windows = 1  # of a step split into parts (see `_queue_parts_step`)
         n = sim.n
@@ -204,9 +205,11 @@ class EventStepper(Stepper):
         # One queue on one thread with one grid level lists each circle's neighbours within the
         # step's reach as it first predicts, and searches those lists after each event
         # (`search._first_events_once`); the other paths search cells.
-        self._listed = self._event_queue and sim._serial and not sim._two_level
+        self._listed = self.lists_neighbours(n) and not sim._two_level
         self._lists = (ti.ndarray(ti.i32, shape=n if self._listed else 1),
                        ti.ndarray(ti.i32, shape=n * LIST_SLOTS if self._listed else 1))
+        # The lists' absolute allowance beyond the reach, against round-off in the positions.
+        self._list_allowance = LIST_ALLOWANCE_ULPS * float(np.finfo(sim._np_real).eps) * max(sim.box)
         if not self._parts:
             return
         self._label = ti.ndarray(ti.i32, shape=n)
@@ -227,9 +230,7 @@ class EventStepper(Stepper):
         """The squared distance within which the first predictions list a circle's neighbours:
         the step's reach, with a margin over the round-off of the positions (a longer list
         costs a little; a shorter one would miss a pair)."""
-        sim = self.sim
-        margin = LIST_ALLOWANCE_ULPS * float(np.finfo(sim._np_real).eps) * max(sim.box)
-        return (self._reach * (1.0 + 1e-9) + margin) ** 2
+        return (self._reach * (1.0 + 1e-9) + self._list_allowance) ** 2
 
     def _same_args(self):
         """(radius, inverse mass) of `_same_circles`, or zeros (unread) for circles of several,
