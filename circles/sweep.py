@@ -730,11 +730,11 @@ def _plot_published(ax, sweep, values):
 
 
 def _number_of(value):
-    if isinstance(value, list):
-        return value[0] if len(value) else math.nan
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        return value
-    return str(value)
+    """Where a point goes on the x axis: a number as it is, a range ([low, high]) at its low end,
+    anything else (a start, a list of species) as a category named by its text."""
+    if isinstance(value, list) and value and isinstance(value[0], (int, float)):
+        value = value[0]
+    return value if isinstance(value, (int, float)) else str(value)
 
 
 # ---- the command line ---------------------------------------------------------------------

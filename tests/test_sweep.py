@@ -993,3 +993,24 @@ def check_blocks(result, fields, ends):
         assert result["blocks"]["energy_change"][block] == pytest.approx(
             (after["kinetic_energy"] - before["kinetic_energy"]) / e0, rel=1e-9, abs=1e-15)
         before = after
+
+
+def test_a_figure_places_ranges_at_their_low_end_and_words_as_categories(tmp_path):
+    """The x axis of a sweep's figure: a varied range ([low, high]) at its low end, a number as it
+    is; a varied word (the boundary) as a category named by it."""
+    import matplotlib.pyplot as plt
+
+    text = TINY.replace("area_fraction = [0.1, 0.3, 0.5]", "radius = [[0.04, 0.05], 0.03]")
+    sweep = sweeps.read_sweep(write(tmp_path, text))
+    rows = [({"radius": [0.04, 0.05]}, {"energy_change": "1e-12", "energy_change_se": "1e-13"}),
+            ({"radius": 0.03}, {"energy_change": "2e-12", "energy_change_se": "1e-13"})]
+    fig = sweeps.sweep_figure(sweep, rows, "energy_change")
+    assert list(fig.axes[0].get_lines()[0].get_xdata()) == [0.04, 0.03]
+    plt.close(fig)
+    text = TINY.replace("area_fraction = [0.1, 0.3, 0.5]", 'boundary = ["walls", "periodic"]')
+    sweep = sweeps.read_sweep(write(tmp_path, text, "words.toml"))
+    rows = [({"boundary": b}, {"energy_change": "1e-12", "energy_change_se": "1e-13"}) for b in ("walls", "periodic")]
+    fig = sweeps.sweep_figure(sweep, rows, "energy_change")
+    assert list(fig.axes[0].get_lines()[0].get_xdata()) == ["walls", "periodic"]
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["walls", "periodic"]
+    plt.close(fig)
