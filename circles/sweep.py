@@ -485,7 +485,7 @@ def read_results(out, sweep):
     rows = list(csv.DictReader(lines))
     if lines and next(csv.reader(lines[:1])) != columns(sweep):
         raise SweepError(f"{results} has other columns than this sweep writes: give another --out, or remove it")
-    return {tuple(row[k] for k in sweep.varied): row for row in rows}
+    return {_point_key(json.loads(row[k]) for k in sweep.varied): row for row in rows}
 
 
 class _ResultsFile:

@@ -931,6 +931,12 @@ def test_a_sweep_file_takes_species_in_its_scene_and_varies_them(circles_cpu, tm
     assert Scene.from_dict(sweep.point_scene(1, 0)).radius == (0.05, 0.07)
     run = sweeps.run_sweep(sweep, tmp_path / "out")
     assert len(run.rows) == 2 and all(float(row["temperature"]) > 0 for row in run.rows)
+    # The same sweep with each species written radius first: its rows are found on a rerun.
+    reordered = varied.replace("{count = 40, radius = 0.05}", "{radius = 0.05, count = 40}")
+    sweep = sweeps.read_sweep(write(tmp_path, reordered, "reordered.toml"))
+    assert sweeps.run_sweep(sweep, tmp_path / "again").ran == [0, 1]
+    rerun = sweeps.run_sweep(sweep, tmp_path / "again")
+    assert rerun.ran == [] and rerun.skipped == [0, 1]
 
 
 def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circles_cpu, tmp_path):
