@@ -937,6 +937,9 @@ def test_a_sweep_file_takes_species_in_its_scene_and_varies_them(circles_cpu, tm
     assert sweeps.run_sweep(sweep, tmp_path / "again").ran == [0, 1]
     rerun = sweeps.run_sweep(sweep, tmp_path / "again")
     assert rerun.ran == [] and rerun.skipped == [0, 1]
+    # ... and in the folder of the sweep as first written: a species is the same whatever its keys' order.
+    rerun = sweeps.run_sweep(sweep, tmp_path / "out")
+    assert rerun.ran == [] and rerun.skipped == [0, 1]
 
 
 def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circles_cpu, tmp_path):
