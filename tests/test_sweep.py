@@ -499,10 +499,27 @@ def test_a_rerun_runs_exactly_the_points_results_csv_lacks(serial, tmp_path):
     kept = [row for row in body if row[header.index("area_fraction")] != "0.3"]
     assert len(kept) == 2
     with open(out / "results.csv", "w", newline="") as file:
-        csv.writer(file).writerows([header, *kept])
+        csv.writer(file, lineterminator="\n").writerows([header, *kept])
     run = sweeps.run_sweep(sweep, out)
     assert run.ran == [1] and run.skipped == [0, 2]
     assert sorted(run.results) == [(1, r) for r in range(sweep.repeats)]
+    assert table(out) == table(serial_out)
+    assert b"\r" not in (out / "results.csv").read_bytes()  # lines end in \n alone, on every system
+
+
+def test_a_rerun_over_an_empty_results_csv_writes_its_header_and_every_point(serial, tmp_path):
+    """results.csv of no bytes beside the sweep's sweep.json (a stop as the file was made): the
+    rerun writes the header once and runs every point, and the table ends as the serial one."""
+    import shutil
+
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    shutil.copytree(serial_out, out)
+    (out / "results.csv").write_bytes(b"")
+    run = sweeps.run_sweep(sweep, out)
+    assert run.ran == [0, 1, 2] and run.skipped == []
+    lines = (out / "results.csv").read_text().splitlines()
+    assert lines[0] == ",".join(sweeps.columns(sweep)) and len(lines) == 4
     assert table(out) == table(serial_out)
 
 
