@@ -918,6 +918,12 @@ def test_results_csv_cut_short_by_a_stop_loses_only_its_last_line(serial, tmp_pa
     assert len(sweeps.read_results(copy, sweep)) == 3 and (copy / "results.csv").read_bytes() == whole
     (copy / "results.csv").write_bytes(whole + b"0.7,2,4,1.5")
     assert len(sweeps.read_results(copy, sweep)) == 3 and (copy / "results.csv").read_bytes() == whole
+    (copy / "results.csv").write_bytes(whole.replace(b"pair_collisions", b"collisions", 1))  # a column renamed
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_results(copy, sweep)
+    assert str(refused.value) == (f"{copy / 'results.csv'} has other columns than this sweep writes: give another "
+                                  "--out, or remove it")
+    (copy / "results.csv").write_bytes(whole)
     (copy / "sweep.json").unlink()
     with pytest.raises(sweeps.SweepError) as refused:
         sweeps.read_results(copy, sweep)
