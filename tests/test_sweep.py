@@ -1046,3 +1046,26 @@ def test_a_figure_places_ranges_at_their_low_end_and_words_as_categories(tmp_pat
     assert list(fig.axes[0].get_lines()[0].get_xdata()) == ["walls", "periodic"]
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["walls", "periodic"]
     plt.close(fig)
+
+
+def test_a_sweep_files_limits_are_reached_and_kept(tmp_path):
+    """Each limit of [sweep] is allowed at its edge: repeats = MOST_REPEATS and blocks =
+    MOST_BLOCKS, equilibrate = 0; a measure of MOST_DURATION passes its own check and is refused
+    by the step count; a missing file is named as a sweep file; a stray key beside [scene] is
+    unknown, not a scene file."""
+    text = TINY.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]")
+    edge = text.replace("repeats = 2", f"repeats = {sweeps.MOST_REPEATS}").replace(
+        "blocks = 4", f"blocks = {sweeps.MOST_BLOCKS}").replace("equilibrate = 0.5", "equilibrate = 0.0")
+    sweep = sweeps.read_sweep(write(tmp_path, edge))
+    assert (sweep.repeats, sweep.blocks, sweep.equilibrate) == (sweeps.MOST_REPEATS, sweeps.MOST_BLOCKS, 0.0)
+    longest = text.replace("measure = 2.0", f"measure = {sweeps.MOST_DURATION:.0f}.0")
+    with pytest.raises(sweeps.SweepError, match=r"equilibrate \+ measure = 1e\+12 s is .* steps of the point's scene, "
+                       r"more than 1e10"):
+        sweeps.read_sweep(write(tmp_path, longest, "longest.toml"))
+    missing = tmp_path / "missing.toml"
+    with pytest.raises(sweeps.SweepError) as refused:
+        sweeps.read_sweep(missing)
+    assert str(refused.value) == f"sweep file {missing} not found"
+    with pytest.raises(ValueError) as refused:
+        sweeps.sweep_from_dict({"scene": {"n": 40}, "n": 40})
+    assert str(refused.value) == "unknown key(s) n: a sweep file has the tables [scene], [vary], [sweep]"
