@@ -356,6 +356,8 @@ class Scene:
     species: circles of several sizes in place of radius, as entries {"count": C, "radius": R}
     or {"fraction": F, "radius": R} (fractions of n, the last species taking what rounding
     leaves); held as ((count, radius), ...), the circles in that order, radius then their range.
+    aspect: the width over the height of the box made from area_fraction (16:9 without it; a
+    crystal fixes its own): 1.0 for a square box.
     """
 
     n: int = 10_000
@@ -372,6 +374,7 @@ class Scene:
     crystal: tuple | None = None
     start: str = "fluid"
     species: tuple | None = None
+    aspect: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "n", scalar(self.n))
@@ -468,9 +471,26 @@ class Scene:
         nx, ny = self.crystal
         return nx / (ny * math.sqrt(3.0) / 2.0)
 
+    def _aspect(self):
+        """The aspect of the box made from the area fraction: `aspect`, or DEFAULT_BOX's."""
+        if self.aspect is None:
+            return DEFAULT_BOX[0] / DEFAULT_BOX[1]
+        aspect = _finite("aspect", self.aspect)
+        if not aspect > 0:
+            raise ValueError(f"aspect = {aspect!r} must be > 0: give the box's width over its height, e.g. 1.0 for "
+                             "a square")
+        return aspect
+
     def _box_of(self, rlo, rhi):
-        """The box given, the box made for the area fraction given, or DEFAULT_BOX; for a crystal,
-        of the crystal's aspect."""
+        """The box given, the box made for the area fraction given (of `aspect`, DEFAULT_BOX's
+        without it), or DEFAULT_BOX; for a crystal, of the crystal's aspect."""
+        if self.aspect is not None:
+            if self.crystal is not None:
+                raise ValueError(f"aspect = {self.aspect!r} and crystal = {list(self.crystal)!r} are both given: the "
+                                 "crystal fixes the box's aspect (nx : ny sqrt(3)/2); drop aspect")
+            if self.box is not None or self.area_fraction is None:
+                raise ValueError(f"aspect = {self.aspect!r} shapes the box made from area_fraction: give "
+                                 "area_fraction with it, in place of a box")
         if self.area_fraction is None:
             if self.crystal is not None and self.box is None:
                 raise ValueError(f"crystal = {list(self.crystal)!r}: give area_fraction (the box is then made of "
@@ -487,7 +507,7 @@ class Scene:
         if self.box is None:
             if self.crystal is not None:
                 return box_for_area_fraction(self.n, (rlo, rhi), fraction, self.crystal_aspect())
-            return box_for_area_fraction(self.n, (rlo, rhi), fraction, species=self.species)
+            return box_for_area_fraction(self.n, (rlo, rhi), fraction, self._aspect(), species=self.species)
         box = check_box(self.box)
         held = self._expected_area_fraction(box, rlo, rhi)
         if not math.isclose(held, fraction, rel_tol=1e-9):
@@ -506,7 +526,7 @@ class Scene:
         d["box"] = list(self.box)
         d["radius"] = list(self.radius)
         d["speed"] = list(self.speed)
-        del d["area_fraction"]  # the box says it
+        del d["area_fraction"], d["aspect"]  # the box says them
         if self.crystal is None:
             del d["crystal"]
         else:
@@ -530,7 +550,8 @@ class Scene:
             raise ValueError(f"unknown scene key(s) {', '.join(unknown)}: known keys are {', '.join(sorted(known))}")
         if d.get("box") is not None and d.get("area_fraction") is not None:
             raise ValueError(f"box = {d['box']!r} and area_fraction = {d['area_fraction']!r} are both given: give "
-                             "one of them (area_fraction makes a box of aspect 16:9 for the circles)")
+                             "one of them (area_fraction makes a box of aspect 16:9 for the circles, or of the "
+                             "aspect given)")
         kw = dict(d)
         if kw.get("species") is not None:
             if "radius" in kw:

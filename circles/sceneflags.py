@@ -90,7 +90,7 @@ def scene_defaults_text():
 
     fields = {name: getattr(Scene, name) for name in Scene.__dataclass_fields__}
     fields["box"] = DEFAULT_BOX
-    del fields["area_fraction"]
+    del fields["area_fraction"], fields["aspect"]
     fields["dt"] = "chosen from the scene"
     return (f"Without SCENE.toml, the showcase: {text(SHOWCASE_SCENE)}. A field that the showcase or "
             f"the file leaves out, and no flag sets, takes Scene's default: {text(fields)}.")
@@ -125,12 +125,14 @@ def sized_scene_fields(fields, overrides, args):
     """The scene's fields, flags over the file's, with the box made by --area-fraction (the
     aspect of the box given, 16:9 without one) or, for the showcase given --n alone, grown
     with n so that the showcase's area fraction is kept. A --box flag takes the place of the
-    file's area_fraction, and --area-fraction that of its box."""
+    file's area_fraction and aspect, and --area-fraction that of its box (of the file's aspect
+    where it gives one)."""
     from .scene import DEFAULT_BOX, Scene, box_for_area_fraction, check_box
 
     merged = {**fields, **overrides}
     if "box" in overrides:
         merged.pop("area_fraction", None)
+        merged.pop("aspect", None)
     if "species" in overrides:  # a flag's sizes over the file's; counts fix n
         merged.pop("radius", None)
         if "n" not in overrides and all("count" in entry for entry in overrides["species"]):
@@ -149,6 +151,9 @@ def sized_scene_fields(fields, overrides, args):
     if phi is None and not args.scene and "n" in overrides and not {"box", "radius"} & set(overrides):
         phi = Scene.from_dict(SHOWCASE_SCENE).area_fraction
     if phi is not None:
+        if merged.get("aspect") is not None and merged.get("box") is None:
+            merged["area_fraction"] = phi  # Scene makes the box, of the file's aspect
+            return merged
         width, height = check_box(merged.pop("box", None) or DEFAULT_BOX)
         merged.pop("area_fraction", None)
         if merged.get("species") is not None:  # Scene makes the box, of this aspect, from the species' radii

@@ -164,21 +164,30 @@ def test_pieces_cut_the_equilibration_only_with_checkpoints():
     assert sweeps.pieces(0.5, 1.0, 2) == [(0.5, None), (1.0, 0), (1.5, 1)]
 
 
-def test_a_task_outside_a_worker_starts_taichi_on_the_cpu_with_the_threads_asked_for(circles_cpu):
+def test_a_task_outside_a_worker_starts_taichi_on_the_cpu_with_the_threads_asked_for():
     """Where no runtime is running: the threads given (at least one), or every core outside a
-    Dask worker; a runtime already running is kept."""
-    import taichi as ti
+    Dask worker; a runtime already running is kept. In a process of its own: the runtime it
+    starts again would leave the kernels of this process's tests behind."""
+    import subprocess
+    import sys
 
-    from circles import backend
+    script = textwrap.dedent("""
+        import os
+        import taichi as ti
+        from circles import backend, sweep as sweeps
 
-    for threads, want in ((None, os.cpu_count() or 1), (3, 3), (0, 1)):
-        backend._state["initialized"] = False
-        sweeps._ensure_runtime(threads)
-        assert backend._state["arch"] == "cpu"
-        assert ti.lang.impl.current_cfg().cpu_max_num_threads == want
-    runtime = backend._state["runtime"]
-    sweeps._ensure_runtime(5)
-    assert backend._state["runtime"] == runtime
+        for threads, want in ((None, os.cpu_count() or 1), (3, 3), (0, 1)):
+            backend._state["initialized"] = False
+            sweeps._ensure_runtime(threads)
+            assert backend._state["arch"] == "cpu"
+            assert ti.lang.impl.current_cfg().cpu_max_num_threads == want, (threads, want)
+        runtime = backend._state["runtime"]
+        sweeps._ensure_runtime(5)
+        assert backend._state["runtime"] == runtime
+        print("checked")
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and done.stdout.split()[-1] == "checked", done.stderr[-2000:]
 
 
 def test_a_task_that_died_goes_on_from_its_checkpoint_with_the_same_result(circles_cpu, tmp_path, monkeypatch):
@@ -299,7 +308,7 @@ def test_bad_sweep_files_are_refused_before_any_task(tmp_path, capsys, change, w
 OBSERVABLE_NAMES = ("compressibility, collision_rate, energy_change, pressure, wall_pressure, temperature, "
                     "reduced_pressure, hexatic_order")
 SCENE_KEYS = ("n, box, radius, speed, mass, boundary, scheme, precision, dt, seed, area_fraction, crystal, start, "
-              "species")
+              "species, aspect")
 SWEEP_KEYS = "repeats, equilibrate, measure, blocks, observables, checkpoint_every"
 OUT_OF_RANGE = "is out of range: give simulated seconds"
 FRACTION = "0.1, 0.3, 0.5]"
@@ -307,7 +316,7 @@ FRACTION = "0.1, 0.3, 0.5]"
 
 @pytest.mark.parametrize("old, new, message", [
     ("[vary]\n", "[vary]\ncolour = [1, 2]\n", "[vary] unknown key colour: vary one of the Scene fields n, box, radius, "
-     "speed, mass, boundary, scheme, precision, dt, area_fraction, crystal, start, species"),
+     "speed, mass, boundary, scheme, precision, dt, area_fraction, crystal, start, species, aspect"),
     (FRACTION, "]", "[vary] area_fraction = [] must be a non-empty list of values, e.g. area_fraction = [a, b]"),
     ("[" + FRACTION, "0.3", "[vary] area_fraction = 0.3 must be a non-empty list of values, e.g. area_fraction = "
      "[a, b]"),
@@ -1069,3 +1078,16 @@ def test_a_sweep_files_limits_are_reached_and_kept(tmp_path):
     with pytest.raises(ValueError) as refused:
         sweeps.sweep_from_dict({"scene": {"n": 40}, "n": 40})
     assert str(refused.value) == "unknown key(s) n: a sweep file has the tables [scene], [vary], [sweep]"
+
+
+def test_a_square_box_sweep_is_compared_with_the_published_pressures_of_its_own_n(tmp_path):
+    """224 disks in a square box ([scene] aspect = 1.0) at 0.700: Li et al.'s 224-disk value
+    (8.6876 +- 0.0012), not those of the square boxes of 65536 disks and more that Engel et al.
+    give at the same area fraction; none at an area fraction the series lacks."""
+    text = ('[scene]\nn = 224\nradius = 0.5\nmass = "equal"\nboundary = "periodic"\naspect = 1.0\n\n'
+            '[vary]\narea_fraction = [0.700, 0.701]\n\n'
+            '[sweep]\nrepeats = 1\nequilibrate = 0.1\nmeasure = 0.2\nblocks = 2\nobservables = ["reduced_pressure"]\n')
+    sweep = sweeps.read_sweep(write(tmp_path, text))
+    found = sweeps.theory(sweep, {"area_fraction": 0.700}, {"temperature": "0.5"})
+    assert (found["reduced_pressure"], found["reduced_pressure_se"]) == (8.6876, 0.0012)
+    assert "reduced_pressure" not in sweeps.theory(sweep, {"area_fraction": 0.701}, {"temperature": "0.5"})

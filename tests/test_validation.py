@@ -416,3 +416,49 @@ def test_lengths_and_speeds_beyond_what_the_precision_squares_are_refused(circle
         assert sim.stats()["pair_collisions"] == 1, unit
         assert sim.state().vel[0, 0] == pytest.approx(-speed, rel=1e-6)
 
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"aspect": 0.0, "area_fraction": 0.7}, "aspect = 0.0 must be > 0: give the box's width over its height, e.g. 1.0 "
+                                            "for a square"),
+    ({"aspect": -2.0, "area_fraction": 0.7}, "aspect = -2.0 must be > 0: give the box's width over its height, e.g. "
+                                             "1.0 for a square"),
+    ({"aspect": math.inf, "area_fraction": 0.7}, "aspect = inf is not finite: give a finite number"),
+    ({"aspect": 1.0}, "aspect = 1.0 shapes the box made from area_fraction: give area_fraction with it, in place of "
+                      "a box"),
+    ({"aspect": 1.0, "box": (20.0, 20.0)}, "aspect = 1.0 shapes the box made from area_fraction: give area_fraction "
+                                           "with it, in place of a box"),
+    ({"aspect": 1.0, "area_fraction": 0.7, "crystal": (16, 14), "boundary": "periodic"},
+     "aspect = 1.0 and crystal = [16, 14] are both given: the crystal fixes the box's aspect (nx : ny sqrt(3)/2); "
+     "drop aspect"),
+])
+def test_an_aspect_is_refused_where_it_shapes_no_box(circles_cpu, fields, message):
+    with pytest.raises(ValueError) as info:
+        circles_cpu.Scene(n=224, radius=0.5, **fields)
+    assert str(info.value) == message
+
+
+def test_an_aspect_shapes_the_box_made_from_the_area_fraction(circles_cpu, tmp_path):
+    """224 disks of diameter 1 at area fraction 0.7 in a square box: side sqrt(224 pi / 4 / 0.7),
+    from Scene, a scene file and the command line's --area-fraction over a file's aspect; a
+    scene written back holds the box alone."""
+    import argparse
+
+    from circles.sceneflags import sized_scene_fields
+
+    side = math.sqrt(224 * math.pi / 4 / 0.7)
+    scene = circles_cpu.Scene(n=224, radius=0.5, mass="equal", boundary="periodic", area_fraction=0.7, aspect=1.0)
+    assert scene.box == pytest.approx((side, side), rel=1e-14) and scene.area_fraction == pytest.approx(0.7, rel=1e-14)
+    written = scene.to_dict()
+    assert "aspect" not in written and "area_fraction" not in written
+    assert circles_cpu.Scene.from_dict(written).box == scene.box
+    wide = circles_cpu.Scene(n=224, radius=0.5, area_fraction=0.7, aspect=2.0)
+    assert wide.box == pytest.approx((side * math.sqrt(2), side / math.sqrt(2)), rel=1e-14)
+    path = tmp_path / "square.toml"
+    path.write_text("n = 224\nradius = 0.5\narea_fraction = 0.7\naspect = 1.0\n")
+    assert circles_cpu.Scene.from_toml(path).box == pytest.approx((side, side), rel=1e-14)
+    fields = {"n": 224, "radius": 0.5, "area_fraction": 0.6, "aspect": 1.0}
+    flagged = sized_scene_fields(fields, {}, argparse.Namespace(area_fraction=0.7, scene=str(path)))
+    assert circles_cpu.Scene.from_dict(flagged).box == pytest.approx((side, side), rel=1e-14)
+    boxed = sized_scene_fields(fields, {"box": [32.0, 8.0]}, argparse.Namespace(area_fraction=0.7, scene=str(path)))
+    assert circles_cpu.Scene.from_dict(boxed).box == pytest.approx((2 * side, side / 2), rel=1e-14)  # --box's aspect
