@@ -347,6 +347,16 @@ FRACTION = "0.1, 0.3, 0.5]"
     ("blocks = 4", 'blocks = 4\ncheckpoint_every = "1"', "[sweep] checkpoint_every = '1' must be a finite number of "
      "simulated seconds"),
     ("blocks = 4", "blocks = 4\nwarmup = 3", f"[sweep] unknown key(s) warmup: known keys are {SWEEP_KEYS}"),
+    ("blocks = 4", "blocks = 4\nwarmup = 3\ncooldown = 1", "[sweep] unknown key(s) cooldown, warmup: known keys are "
+     f"{SWEEP_KEYS}"),
+    ("n = 40", "n = 40\ncolour = 3\nshade = 4", f"[scene] unknown key(s) colour, shade: known keys are {SCENE_KEYS}"),
+    ("[sweep]", "[extra]\nx = 1\n[more]\ny = 2\n[sweep]", "unknown key(s) extra, more: a sweep file has the tables "
+     "[scene], [vary], [sweep]"),
+    (FRACTION, "0.1, 0.3, 0.3]", "[vary] area_fraction lists 0.3 twice: give each value once"),
+    ("area_fraction = [" + FRACTION, "species = [[{count = 40, radius = 0.05}], [{radius = 0.05, count = 40}]]",
+     "[vary] species lists [{'count': 40, 'radius': 0.05}] twice: give each value once"),
+    (FRACTION, "0.1, 0.95]\nn = [40, 41]", "the point area_fraction = 0.95, n = 40: area_fraction = 0.95 is out of "
+     "range: give a fraction > 0 and at most the densest packing 0.9069 (below about 0.7 for a fluid)"),
     ('"energy_change"]', '"entropy"]', f"[sweep] observables: 'entropy' is unknown: use names from {OBSERVABLE_NAMES}"),
     ('["compressibility", "collision_rate", "energy_change"]', "[]", f"[sweep] observables = [] must be a non-empty "
      f"list of names from {OBSERVABLE_NAMES}"),
@@ -388,10 +398,13 @@ def test_each_refusal_of_a_sweep_file_says_its_key_value_and_fix_word_for_word(t
 
 
 def test_a_sweep_of_more_than_100000_tasks_is_refused_and_one_of_100000_is_not(tmp_path):
-    """101 points of n: 101 x 990 = 99990 tasks pass; 101 x 991 = 100091 do not."""
-    text = TINY.replace("n = 40\n", "").replace("area_fraction = [" + FRACTION, "n = [" + ", ".join(
-        str(40 + k) for k in range(101)) + "]")
-    assert len(sweeps.read_sweep(write(tmp_path, text.replace("repeats = 2", "repeats = 990"))).points) == 101
+    """100 points of n: 100 x 1000 = 100000 tasks pass; 101 points x 991 = 100091 do not."""
+    def points(count):
+        return TINY.replace("n = 40\n", "").replace("area_fraction = [" + FRACTION, "n = [" + ", ".join(
+            str(40 + k) for k in range(count)) + "]")
+
+    assert len(sweeps.read_sweep(write(tmp_path, points(100).replace("repeats = 2", "repeats = 1000"))).points) == 100
+    text = points(101)
     path = write(tmp_path, text.replace("repeats = 2", "repeats = 991"))
     with pytest.raises(sweeps.SweepError) as refused:
         sweeps.read_sweep(path)
