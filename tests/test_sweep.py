@@ -1104,3 +1104,28 @@ def test_a_square_box_sweep_is_compared_with_the_published_pressures_of_its_own_
     found = sweeps.theory(sweep, {"area_fraction": 0.700}, {"temperature": "0.5"})
     assert (found["reduced_pressure"], found["reduced_pressure_se"]) == (8.6876, 0.0012)
     assert "reduced_pressure" not in sweeps.theory(sweep, {"area_fraction": 0.701}, {"temperature": "0.5"})
+
+
+def test_a_points_fields_put_its_values_over_the_base_and_its_seed(tmp_path):
+    """A varied box takes the place of the base's area_fraction, a varied area_fraction that of
+    its box, another field leaves both; the seed is the repeat's, from the base seed (0 when the
+    base gives none, as Scene's default)."""
+    assert sweeps.scene_fields({"n": 40, "area_fraction": 0.3}, {"box": [2.0, 2.0]}, 7) == {
+        "n": 40, "box": [2.0, 2.0], "seed": 7}
+    assert sweeps.scene_fields({"n": 40, "box": [2.0, 2.0]}, {"area_fraction": 0.3}, 7) == {
+        "n": 40, "area_fraction": 0.3, "seed": 7}
+    assert sweeps.scene_fields({"n": 40, "box": [2.0, 2.0], "seed": 1}, {"n": 50}, 7) == {
+        "n": 50, "box": [2.0, 2.0], "seed": 7}
+    unseeded = sweeps.read_sweep(write(tmp_path, TINY.replace("seed = 3\n", "")))
+    zero = sweeps.read_sweep(write(tmp_path, TINY.replace("seed = 3\n", "seed = 0\n"), "zero.toml"))
+    assert [unseeded.point_scene(0, r)["seed"] for r in range(3)] == [zero.point_scene(0, r)["seed"] for r in range(3)]
+    assert len({zero.point_scene(0, r)["seed"] for r in range(3)} | {0}) == 4  # each repeat its own, none the base's
+
+
+def test_a_sweeps_step_count_is_allowed_up_to_1e10(tmp_path):
+    """equilibrate + measure = 2.5 s over dt: 1e10 steps are allowed, 1e10 + 0.5 are not."""
+    at = TINY.replace("speed = [1.0, 1.0]", "speed = [1.0, 1.0]\ndt = 2.5e-10")
+    assert sweeps.read_sweep(write(tmp_path, at)).points
+    over = TINY.replace("speed = [1.0, 1.0]", f"speed = [1.0, 1.0]\ndt = {2.5 / 1.00000000005e10!r}")
+    with pytest.raises(sweeps.SweepError, match=r"is 1e\+10 steps of the point's scene, more than 1e10"):
+        sweeps.read_sweep(write(tmp_path, over, "over.toml"))
