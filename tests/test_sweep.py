@@ -1068,6 +1068,15 @@ def test_a_figure_places_ranges_at_their_low_end_and_words_as_categories(tmp_pat
     assert list(fig.axes[0].get_lines()[0].get_xdata()) == ["walls", "periodic"]
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["walls", "periodic"]
     plt.close(fig)
+    mixtures = [[{"count": 40, "radius": 0.05}], [{"count": 20, "radius": 0.05}, {"count": 20, "radius": 0.07}]]
+    text = TINY.replace("radius = 0.05\n", "").replace(
+        "area_fraction = [0.1, 0.3, 0.5]", "species = [[{count = 40, radius = 0.05}], "
+        "[{count = 20, radius = 0.05}, {count = 20, radius = 0.07}]]").replace("n = 40", "box = [1.0, 1.0]")
+    sweep = sweeps.read_sweep(write(tmp_path, text, "mixtures.toml"))
+    rows = [({"species": m}, {"energy_change": "1e-12", "energy_change_se": "1e-13"}) for m in mixtures]
+    fig = sweeps.sweep_figure(sweep, rows, "energy_change")
+    assert list(fig.axes[0].get_lines()[0].get_xdata()) == [str(m) for m in mixtures]  # a list of species by its text
+    plt.close(fig)
 
 
 def test_a_sweep_files_limits_are_reached_and_kept(tmp_path):
