@@ -462,3 +462,28 @@ def test_an_aspect_shapes_the_box_made_from_the_area_fraction(circles_cpu, tmp_p
     assert circles_cpu.Scene.from_dict(flagged).box == pytest.approx((side, side), rel=1e-14)
     boxed = sized_scene_fields(fields, {"box": [32.0, 8.0]}, argparse.Namespace(area_fraction=0.7, scene=str(path)))
     assert circles_cpu.Scene.from_dict(boxed).box == pytest.approx((2 * side, side / 2), rel=1e-14)  # --box's aspect
+
+
+@pytest.mark.parametrize("args, message", [
+    ((True, 0.5, 0.5), "n = True must be a whole number of circles"),
+    ((2.5, 0.5, 0.5), "n = 2.5 must be a whole number of circles"),
+    ((0, 0.5, 0.5), "n = 0 must be > 0"),
+    ((1, 0.0, 0.5), "radius = 0.0: the smallest value 0.0 is out of range (must be > 0)"),
+    ((1, -0.1, 0.5), "radius = -0.1: the smallest value -0.1 is out of range (must be > 0)"),
+    ((1, 0.5, 0.5, math.nan), "box aspect = nan is not finite: give a finite number"),
+    ((1, 0.5, 0.5, 0.0), "box aspect 0.0 must be > 0"),
+])
+def test_the_box_for_an_area_fraction_refuses_what_makes_no_box(args, message):
+    from circles.scene import box_for_area_fraction
+
+    with pytest.raises(ValueError) as info:
+        box_for_area_fraction(*args)
+    assert str(info.value) == message
+
+
+def test_the_box_for_an_area_fraction_holds_one_circle_as_asked():
+    """One disk of radius 0.5 at area fraction 0.5 in a square: side sqrt(pi / 4 / 0.5)."""
+    from circles.scene import box_for_area_fraction
+
+    side = math.sqrt(math.pi / 4 / 0.5)
+    assert box_for_area_fraction(1, 0.5, 0.5, 1.0) == pytest.approx((side, side), rel=1e-15)
