@@ -487,3 +487,16 @@ def test_the_box_for_an_area_fraction_holds_one_circle_as_asked():
 
     side = math.sqrt(math.pi / 4 / 0.5)
     assert box_for_area_fraction(1, 0.5, 0.5, 1.0) == pytest.approx((side, side), rel=1e-15)
+
+
+def test_a_crystal_is_refused_without_a_box_it_fits(circles_cpu):
+    """A crystal needs area_fraction or a box of its aspect, 29 : 30 sqrt(3)/2 for 29 x 30."""
+    with pytest.raises(ValueError) as info:
+        circles_cpu.Scene(n=870, crystal=(29, 30), radius=0.5, boundary="periodic")
+    assert str(info.value) == ("crystal = [29, 30]: give area_fraction (the box is then made of the crystal's aspect) "
+                               "or a box of aspect nx : ny sqrt(3)/2")
+    with pytest.raises(ValueError) as info:
+        circles_cpu.Scene(n=870, crystal=(29, 30), box=(40.0, 20.0), radius=0.5, boundary="periodic")
+    assert str(info.value) == (f"box = [40.0, 20.0] has aspect 2, and crystal = [29, 30] fits a box of aspect "
+                               f"{29 / (30 * math.sqrt(3) / 2):.9g} (nx : ny sqrt(3)/2): give area_fraction in place "
+                               "of the box, or a box of that aspect")
