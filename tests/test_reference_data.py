@@ -21,6 +21,15 @@ def test_the_table_holds_each_published_series():
     assert all(0 < p.se < 0.02 for p in reference.pressures())
 
 
+def test_the_table_is_filtered_by_source_method_and_n_and_keeps_each_estimator():
+    edmd = reference.pressures("Engel2013", "EDMD")
+    assert len(edmd) == 24 and {(p.method, p.estimator) for p in edmd} == {("EDMD", "virial formula")}
+    assert {p.estimator for p in reference.pressures("Engel2013", "MPMC")} == {"fitting g(r)"}
+    assert {p.estimator for p in reference.pressures("Li2022")} == {"rift formula"}
+    assert reference.pressures("Li2022", "EDMD") == [] and reference.pressures(n=225) == []
+    assert len(reference.pressures()) == 112
+
+
 def test_reduced_pressure_is_z_times_rho_d_squared():
     # eta = rho pi d^2 / 4, so rho d^2 = 4 eta / pi.
     assert reference.reduced_pressure(2.0, 0.5) == pytest.approx(2.0 * 4 * 0.5 / math.pi, rel=1e-15)
