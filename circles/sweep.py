@@ -852,7 +852,11 @@ def main(argv):
         return EXIT_INTERRUPTED
     except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler
         results = os.path.join(out, RESULTS)
-        where = (f"the points done are in {results}" if os.path.isfile(results) else "no point was done")
+        try:
+            done = len(read_results(out, sweep))
+        except (SweepError, OSError):
+            done = 0
+        where = f"the points done are in {results}" if done else "no point was done"
         print(f"circles: the sweep failed: {type(error).__name__}: {error}; {where}", file=sys.stderr)
         return EXIT_FAILED
     finally:

@@ -709,7 +709,8 @@ def test_the_command_refuses_bad_arguments_in_one_line(tmp_path, capsys, args, w
     assert capsys.readouterr().err == f"circles: error: {words}\n"
 
 
-def test_the_command_without_dask_says_how_to_get_it(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("workers", [["--workers", "1"], ["--workers", "2"], []])
+def test_the_command_without_dask_says_how_to_get_it(tmp_path, capsys, monkeypatch, workers):
     import builtins
 
     real = builtins.__import__
@@ -720,7 +721,7 @@ def test_the_command_without_dask_says_how_to_get_it(tmp_path, capsys, monkeypat
         return real(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_dask)
-    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "2", "--out", str(tmp_path / "o")]) == 2
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), *workers, "--out", str(tmp_path / "o")]) == 2
     assert capsys.readouterr().err == ("circles: error: circles sweep runs its tasks on Dask, which is not installed: "
                                        "pip install 'circles-sim[sweep]', or give --workers 0 to run them one by one "
                                        "here\n")
@@ -1138,3 +1139,111 @@ def test_a_sweeps_step_count_is_allowed_up_to_1e10(tmp_path):
     over = TINY.replace("speed = [1.0, 1.0]", f"speed = [1.0, 1.0]\ndt = {2.5 / 1.00000000005e10!r}")
     with pytest.raises(sweeps.SweepError, match=r"is 1e\+10 steps of the point's scene, more than 1e10"):
         sweeps.read_sweep(write(tmp_path, over, "over.toml"))
+
+
+#: Li et al.'s N = 224 in its square box at two of its published area fractions, briefly.
+PUBLISHED = """
+[scene]
+n = 224
+radius = 0.5
+aspect = 1.0
+speed = [1.0, 1.0]
+mass = "equal"
+boundary = "periodic"
+seed = 5
+
+[vary]
+area_fraction = [0.670, 0.700]
+
+[sweep]
+repeats = 1
+equilibrate = 1.0
+measure = 4.0
+blocks = 4
+observables = ["reduced_pressure", "compressibility"]
+"""
+
+
+def test_the_command_says_the_largest_deviations_from_liu_and_from_the_published_pressures(circles_cpu, tmp_path,
+                                                                                              capsys):
+    """The last two lines, from results.csv and the reference table read here: the largest
+    relative deviation of Z from Liu's, and the deviation of beta P d^2 from Li et al.'s at N = 224
+    that is largest in standard errors."""
+    from circles import reference, theory as hard_disks
+
+    out = tmp_path / "out"
+    assert sweeps.main(["sweep", str(write(tmp_path, PUBLISHED)), "--workers", "0", "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    with open(out / "results.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    published = {p.eta: p for p in reference.series(224, 1.0)}
+    liu, li = [], []
+    for row in rows:
+        eta = float(row["area_fraction"])
+        z, z_se = float(row["compressibility"]), float(row["compressibility_se"])
+        liu.append((abs(z / hard_disks.liu_z(eta) - 1), eta, z / hard_disks.liu_z(eta) - 1,
+                    (z - hard_disks.liu_z(eta)) / z_se))
+        p, p_se = float(row["reduced_pressure"]), float(row["reduced_pressure_se"])
+        ref = published[eta].beta_p_d2
+        li.append((abs(p - ref) / p_se, eta, p - ref, (p - ref) / p_se))
+    _, eta, relative, in_se = max(liu)
+    assert lines[-2] == (f"liu         largest deviation of Z from Liu's: {100 * relative:+.2f}% ({in_se:+.1f} standard "
+                         f"errors) at area fraction {eta:g}")
+    _, eta, difference, in_se = max(li)
+    assert lines[-1] == (f"published   largest deviation of beta P d^2 from the published one at this N: "
+                         f"{difference:+.4f} ({in_se:+.1f} standard errors) at area fraction {eta:g}")
+
+
+def test_the_command_picks_liu_s_largest_by_percent_and_the_published_largest_by_standard_errors(
+        serial, tmp_path, capsys, monkeypatch):
+    """Deviations given by hand where the two orders differ: Liu's line takes the largest
+    relative deviation, the published line the largest in standard errors."""
+    given = [(0.1, 1.0, 1.1, -0.09, -9.0), (0.2, 1.0, 1.2, -0.17, -1.7), (0.3, 2.0, 1.9, +0.05, +4.0)]
+    monkeypatch.setattr(sweeps, "deviations", lambda sweep, rows, name="compressibility": given)
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(tmp_path / "o")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-2:] == ["liu         largest deviation of Z from Liu's: -17.00% (-1.7 standard errors) at area "
+                          "fraction 0.2",
+                          "published   largest deviation of beta P d^2 from the published one at this N: -0.1000 "
+                          "(-9.0 standard errors) at area fraction 0.1"]
+
+
+def test_the_command_without_matplotlib_says_the_plots_were_skipped(serial, tmp_path, capsys, monkeypatch):
+    def no_matplotlib(*args):
+        raise ImportError("no matplotlib")
+
+    monkeypatch.setattr(sweeps, "plot_sweep", no_matplotlib)
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(tmp_path / "o")]) == 0
+    assert "\nplots       skipped: matplotlib is not installed (pip install 'circles-sim[plot]')\n" in \
+        capsys.readouterr().out
+
+
+def test_the_command_stopped_by_ctrl_c_says_a_rerun_goes_on(serial, tmp_path, capsys, monkeypatch):
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweeps, "run_sweep", stopped)
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(tmp_path / "o")]) == 130
+    assert capsys.readouterr().err == ("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun "
+                                       "runs the others\n")
+
+
+@pytest.mark.parametrize("fail_at, where", [(0, "no point was done"), (2, "the points done are in OUT")])
+def test_a_failed_task_says_what_failed_and_where_the_points_done_are(serial, tmp_path, capsys, monkeypatch,
+                                                                      fail_at, where):
+    """A task's error ends the command with 1 and one line on stderr naming it; the points done
+    before it stay in results.csv (the first point's two repeats, when the third task fails)."""
+    real, calls = sweeps.run_task, []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) > fail_at:
+            raise RuntimeError("a task's own error")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweeps, "run_task", failing)
+    out = tmp_path / "o"
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(out)]) == 1
+    where = where.replace("OUT", str(out / "results.csv"))
+    assert capsys.readouterr().err == f"circles: the sweep failed: RuntimeError: a task's own error; {where}\n"
+    assert len(sweeps.load_rows(out, sweeps.read_sweep(write(tmp_path, TINY)))) == fail_at // 2
