@@ -1,12 +1,17 @@
-"""The melting sweep's results against the published pressures of the same N and box.
+"""The melting sweeps' results against the published pressures of the same N and box.
 
-    python bench/melting_table.py [SWEEP.toml] [RESULTS_DIR] [--out FILE.md]
+    python bench/melting_table.py [--sweep SWEEP.toml RESULTS_DIR]... [--date YYYY-MM-DD] [--out FILE.md]
+                                  [--plot FILE.png]
 
-Defaults: scenes/melting_sweep.toml and outputs/melting_sweep. Prints a Markdown table: each
-point's beta P d^2 with its standard error and the tasks' wall time, the published value at
-that area fraction (`circles.reference`), their difference in combined standard errors, the
-hexatic order; then whether the loop is resolved (the pressure at 0.698 above that at 0.710 by
-more than 3 combined standard errors, for each start).
+Default: scenes/melting_sweep.toml with outputs/melting_sweep, and
+scenes/melting_coexistence.toml with outputs/melting_coexistence where that has results. Prints
+a Markdown table: each point's beta P d^2 with its standard error, the simulated time measured
+per start and the tasks' wall time, the published value at that area fraction
+(`circles.reference`), their difference in combined standard errors, the hexatic order; then
+whether the loop is resolved (the pressure at 0.698 above that at 0.710 by more than 3 combined
+standard errors, for each start, from the longest measurement of each point). `--plot` draws
+every row with Li et al.'s series: the longest measurement of each point filled, shorter ones
+open.
 """
 import argparse
 import math
@@ -21,26 +26,38 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from circles import sweep as sweeps  # noqa: E402
 
+DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep"),
+           ("scenes/melting_coexistence.toml", "outputs/melting_coexistence")]
+
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("sweep", nargs="?", default=str(ROOT / "scenes" / "melting_sweep.toml"))
-    parser.add_argument("results", nargs="?", default=str(ROOT / "outputs" / "melting_sweep"))
+    parser.add_argument("--sweep", nargs=2, action="append", metavar=("SWEEP.toml", "RESULTS_DIR"),
+                        help="a sweep file and its results folder (repeatable)")
+    parser.add_argument("--date", default=time.strftime("%Y-%m-%d"), help="the date the sweeps ran")
     parser.add_argument("--out")
+    parser.add_argument("--plot", help="a PNG of beta P d^2 against the area fraction")
     args = parser.parse_args()
     from bench import cpu_details, cpu_model
 
-    sweep = sweeps.read_sweep(args.sweep)
-    rows = sweeps.load_rows(args.results, sweep)
-    lines = [f"`{os.path.relpath(args.sweep, ROOT)}` on {cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, "
-             f"{time.strftime('%Y-%m-%d')}: `circles sweep {os.path.relpath(args.sweep, ROOT)} --workers 2`, then "
-             f"`python bench/melting_table.py`. {sweep.repeats} repeats of {sweep.equilibrate:g} time units of "
-             f"equilibration and {sweep.measure:g} of measurement in {sweep.blocks} blocks per point.", "",
-             "| area fraction | start | beta P d^2 | published (Li et al. 2022) | difference / combined SE | "
-             "hexatic order | wall s (tasks) |", "|---|---|---|---|---|---|---|"]
-    by_start = {}
-    for values, row in rows:
-        eta, start = float(values["area_fraction"]), values.get("start", "")
+    pairs = args.sweep or [(ROOT / s, ROOT / r) for s, r in DEFAULT if (ROOT / r / sweeps.RESULTS).is_file()]
+    runs, points = [], []
+    for path, results in pairs:
+        sweep = sweeps.read_sweep(path)
+        name = os.path.relpath(path, ROOT)
+        runs.append((name, f"`{name}`: {sweep.repeats} repeats of {sweep.equilibrate:g} time units of equilibration "
+                           f"and {sweep.measure:g} of measurement in {sweep.blocks} blocks per point"))
+        for values, row in sweeps.load_rows(results, sweep):
+            points.append((float(values["area_fraction"]), values.get("start", ""), sweep.repeats * sweep.measure,
+                           sweep, values, row))
+    lines = [f"{cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, a task a core, {args.date}: "
+             + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
+             + "; ".join(words for _, words in runs) + ". Measured: the simulated time measured per start, all "
+             "repeats together.", "",
+             "| area fraction | start | measured | beta P d^2 | published (Li et al. 2022) | "
+             "difference / combined SE | hexatic order | wall s (tasks) |", "|---|---|---|---|---|---|---|---|"]
+    longest = {}
+    for eta, start, measured, sweep, values, row in sorted(points, key=lambda p: p[:3]):
         got, se = float(row["reduced_pressure"]), float(row["reduced_pressure_se"])
         known = sweeps.theory(sweep, values, row)
         if "reduced_pressure" in known:
@@ -50,19 +67,60 @@ def main():
         else:
             published, z = "", ""
         order = f"{float(row['hexatic_order']):.3f}" if "hexatic_order" in row else ""
-        lines.append(f"| {eta:.3f} | {start} | {got:.4f} ± {se:.4f} | {published} | {z} | {order} | "
+        lines.append(f"| {eta:.3f} | {start} | {measured:g} | {got:.4f} ± {se:.4f} | {published} | {z} | {order} | "
                      f"{float(row['task_seconds']):.0f} |")
-        by_start.setdefault(start, {})[round(eta, 6)] = (got, se)
+        longest[(start, round(eta, 6))] = (got, se)  # sorted by the time measured: the longest last
     lines.append("")
-    for start, points in by_start.items():
-        if 0.698 in points and 0.71 in points:
-            (a, ea), (b, eb) = points[0.698], points[0.71]
+    for start in dict.fromkeys(start for start, _ in longest):
+        if (start, 0.698) in longest and (start, 0.71) in longest:
+            (a, ea), (b, eb) = longest[(start, 0.698)], longest[(start, 0.71)]
             lines.append(f"Loop, start {start}: beta P d^2 at 0.698 minus at 0.710 = {a - b:+.4f}, "
                          f"{(a - b) / math.hypot(ea, eb):+.1f} combined standard errors.")
+    if args.plot:
+        plot(points, longest, args.plot)
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
         Path(args.out).write_text(text)
+
+
+def plot(points, longest, path):
+    """beta P d^2 against the area fraction: each start's rows, filled where the row is the
+    point's longest measurement, and the published series of the sweeps' N and box."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from circles import reference
+    from circles.scene import Scene
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), dpi=100)
+    scene = Scene.from_dict(sweeps.scene_fields(points[0][3].scene, points[0][4], 0))
+    published = reference.series(scene.n, scene.box[0] / scene.box[1])
+    for ax in axes:  # all points, and the loop close up
+        ax.errorbar([p.eta for p in published], [p.beta_p_d2 for p in published], yerr=[p.se for p in published],
+                    color="0.3", lw=1, label=f"Li et al. 2022 (ECMC), N = {scene.n}")
+        for k, start in enumerate(dict.fromkeys(p[1] for p in points)):
+            shift = (k - 0.5) * 0.0006  # the starts side by side at each area fraction
+            for best in (True, False):
+                rows = [(eta, float(row["reduced_pressure"]), float(row["reduced_pressure_se"]))
+                        for eta, s, _, _, _, row in points
+                        if s == start and (longest[(s, round(eta, 6))][0] == float(row["reduced_pressure"])) == best]
+                if rows:
+                    ax.errorbar([r[0] + shift for r in rows], [r[1] for r in rows], yerr=[r[2] for r in rows],
+                                fmt="o", ms=4, capsize=2, color=f"C{k}", mfc=f"C{k}" if best else "white",
+                                label=f"{start} start" + ("" if best else ", shorter runs"))
+        ax.set_xlabel("area fraction")
+        ax.set_ylabel("reduced pressure beta P d^2")
+    axes[0].set_xlim(min(p[0] for p in points) - 0.003, max(p[0] for p in points) + 0.003)
+    axes[1].set_xlim(0.6925, max(p[0] for p in points) + 0.002)
+    axes[1].set_ylim(8.9, 9.17)
+    axes[1].set_title("the loop", fontsize=10)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

@@ -1247,3 +1247,14 @@ def test_a_failed_task_says_what_failed_and_where_the_points_done_are(serial, tm
     where = where.replace("OUT", str(out / "results.csv"))
     assert capsys.readouterr().err == f"circles: the sweep failed: RuntimeError: a task's own error; {where}\n"
     assert len(sweeps.load_rows(out, sweeps.read_sweep(write(tmp_path, TINY)))) == fail_at // 2
+
+
+def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longer():
+    melting = sweeps.read_sweep("scenes/melting_sweep.toml")
+    longer = sweeps.read_sweep("scenes/melting_coexistence.toml")
+    assert {k: v for k, v in longer.scene.items() if k != "seed"} == {k: v for k, v in melting.scene.items()
+                                                                       if k != "seed"}
+    assert longer.scene["seed"] != melting.scene["seed"]  # runs of their own, not the sweep's again
+    assert all(point in melting.points for point in longer.points) and len(longer.points) == 4
+    assert longer.repeats * longer.measure == 5 * melting.repeats * melting.measure
+    assert (longer.equilibrate, longer.observables) == (melting.equilibrate, melting.observables)
