@@ -7,6 +7,7 @@ of choices, the limit too; wording is free.
 """
 
 import math
+import os
 import re
 
 import numpy as np
@@ -500,3 +501,51 @@ def test_a_crystal_is_refused_without_a_box_it_fits(circles_cpu):
     assert str(info.value) == (f"box = [40.0, 20.0] has aspect 2, and crystal = [29, 30] fits a box of aspect "
                                f"{29 / (30 * math.sqrt(3) / 2):.9g} (nx : ny sqrt(3)/2): give area_fraction in place "
                                "of the box, or a box of that aspect")
+
+
+def test_the_box_suggested_beyond_the_densest_packing_holds_the_circles_at_half_full():
+    """The refusal offers a box of the given one's shape, each side rounded up to 3 significant
+    digits, that holds the circles at area fraction 0.5: at most 0.5 and within the rounding."""
+    from circles.scene import Scene
+
+    for n, box in ((121, (1.0, 1.0)), (4157, (16.0, 9.0)), (2000, (0.0123, 0.0456))):
+        r = 0.05 if box == (1.0, 1.0) else 0.1 if box == (16.0, 9.0) else 0.0006
+        with pytest.raises(ValueError) as info:
+            Scene(n=n, box=box, radius=r)
+        found = re.search(r": (\S+) x (\S+) holds them at area fraction 0\.5 \(box = \[(\S+), (\S+)\], or "
+                          r"area_fraction = 0\.5 in place of the box\)$", str(info.value))
+        w, h = float(found[1]), float(found[2])
+        assert (float(found[3]), float(found[4])) == (w, h)
+        filled = n * math.pi * r * r / (w * h)
+        assert 0.5 * (1 - 0.02) <= filled <= 0.5  # each side up by less than a unit in its third digit
+        assert w / h == pytest.approx(box[0] / box[1], rel=0.01)
+        assert len(f"{w:g}".replace(".", "").strip("0")) <= 3 and len(f"{h:g}".replace(".", "").strip("0")) <= 3
+
+
+def test_a_scene_file_that_cannot_be_read_is_named_with_the_reason(tmp_path):
+    from circles.scene import Scene
+
+    missing = tmp_path / "missing.toml"
+    refused(lambda: Scene.from_toml(missing), f"^{re.escape(f'scene file {missing} not found')}$")
+    refused(lambda: Scene.from_toml(tmp_path), f"^{re.escape(f'scene file {tmp_path} is a folder: give a .toml file')}$")
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(b'n = 10\n# caf\xe9\n')
+    refused(lambda: Scene.from_toml(latin), "^" + re.escape(f"{latin}: not UTF-8 text (byte 0xe9 at offset 12): save "
+                                                            "the scene file as UTF-8") + "$")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("n = \n")
+    refused(lambda: Scene.from_toml(bad), "^" + re.escape(f"{bad}: not valid TOML (") + r".+\)$")
+    if os.geteuid() != 0:  # root reads any file
+        locked = tmp_path / "locked.toml"
+        locked.write_text("n = 10\n")
+        locked.chmod(0)
+        refused(lambda: Scene.from_toml(locked), f"^cannot read scene file {re.escape(str(locked))}: Permission denied$")
+
+
+def test_a_scene_file_s_run_table_is_for_the_command_line_alone(tmp_path):
+    from circles.scene import Scene, read_scene_toml
+
+    path = tmp_path / "scene.toml"
+    path.write_text('n = 12\nradius = 0.1\n\n[run]\nduration = 3.0\n')
+    assert read_scene_toml(path) == {"n": 12, "radius": 0.1}
+    assert Scene.from_toml(path) == Scene(n=12, radius=0.1)
