@@ -549,3 +549,38 @@ def test_a_scene_file_s_run_table_is_for_the_command_line_alone(tmp_path):
     path.write_text('n = 12\nradius = 0.1\n\n[run]\nduration = 3.0\n')
     assert read_scene_toml(path) == {"n": 12, "radius": 0.1}
     assert Scene.from_toml(path) == Scene(n=12, radius=0.1)
+
+
+def test_scene_from_dict_refuses_in_words_what_a_scene_cannot_hold():
+    from dataclasses import fields
+
+    from circles.scene import Scene
+
+    known = ", ".join(sorted(f.name for f in fields(Scene)))
+    cases = [
+        ({"n": 3, "circle": [{"x": 1}]}, "the scene lists its circles ([[circle]] entries), which a random Scene cannot "
+                                         "hold: read it with circles.scenefile.read_circle_list and simulate it with "
+                                         "circles.Simulation.from_arrays"),
+        ({"n": 3, "colour": 1, "bounds": 2}, f"unknown scene key(s) bounds, colour: known keys are {known}"),
+        ({"n": 3, "box": [2.0, 2.0], "area_fraction": 0.3}, "box = [2.0, 2.0] and area_fraction = 0.3 are both given: "
+                                                            "give one of them (area_fraction makes a box of aspect 16:9 "
+                                                            "for the circles, or of the aspect given)"),
+        ({"radius": 0.1, "species": [{"count": 3, "radius": 0.1}]}, "radius and species are both given: the species "
+                                                                   "give the radii; drop radius"),
+    ]
+    for fields_, words in cases:
+        with pytest.raises(ValueError) as info:
+            Scene.from_dict(fields_)
+        assert str(info.value) == words
+
+
+def test_scene_from_dict_takes_toml_s_lists_and_counts_n_from_species_and_crystals():
+    from circles.scene import Scene
+
+    scene = Scene.from_dict({"n": 5, "box": [3.0, 2.0], "radius": [0.1, 0.2], "speed": [0.5, 1.0]})
+    assert (scene.box, scene.radius, scene.speed) == ((3.0, 2.0), (0.1, 0.2), (0.5, 1.0))
+    mixed = Scene.from_dict({"species": [{"count": 3, "radius": 0.1}, {"count": 4, "radius": 0.2}], "box": [4.0, 4.0]})
+    assert mixed.n == 7 and isinstance(mixed.species, tuple)
+    crystal = Scene.from_dict({"crystal": [4, 6], "area_fraction": 0.5, "radius": 0.5, "boundary": "periodic"})
+    assert crystal.n == 24 and crystal.crystal == (4, 6)
+    assert Scene.from_dict({"n": 5, "radius": 0.1}) == Scene(n=5, radius=0.1)
