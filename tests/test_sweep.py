@@ -451,17 +451,18 @@ def test_repeat_seeds_are_distinct_and_fixed_by_the_base_seed():
 
 
 @pytest.mark.cluster
-def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys):
+def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys, monkeypatch):
     """`circles sweep` end to end: its own cluster of two workers, the serial numbers, a plot per
-    observable, and Liu's deviation said; run again, every point is skipped."""
+    observable, and Liu's deviation said; run again, every point is skipped. On a machine of
+    four cores (as the command sees it), each worker gets two threads."""
     sweep, serial_out = serial
     path = write(tmp_path, TINY)
     out = tmp_path / "out"
+    monkeypatch.setattr(sweeps.os, "cpu_count", lambda: 4)
     assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
     said = capsys.readouterr().out
     lines = said.splitlines()
-    threads = sweeps.worker_threads(os.cpu_count() or 1, 2)
-    assert lines[0] == f"sweep       3 points x 2 repeats on {sweeps.cluster_words(2, threads)}"
+    assert lines[0] == "sweep       3 points x 2 repeats on a local cluster of 2 worker processes, 2 threads each"
     assert lines[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
     assert "deviation of Z from Liu's" in said
     assert table(out) == table(serial_out)
