@@ -498,7 +498,13 @@ def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys)
     sweep, serial_out = serial
     address = cluster.scheduler.address
     out = tmp_path / "out"
+
+    def executed():  # tasks run by that cluster's workers so far
+        return sum(cluster.run(lambda dask_worker: dask_worker.state.executed_count).values())
+
+    before = executed()
     assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
+    assert executed() - before == 3 * 2  # every task on that cluster, not here or on a cluster of its own
     said = capsys.readouterr().out.splitlines()
     assert said[0] == f"sweep       3 points x 2 repeats on the Dask scheduler at {address}"
     assert said[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
