@@ -459,7 +459,23 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
     path = write(tmp_path, TINY)
     out = tmp_path / "out"
     monkeypatch.setattr(sweeps.os, "cpu_count", lambda: 4)
+    made, real = [], sweeps.local_cluster
+
+    def counted(workers, threads_per_worker=1):  # the cluster made, and the tasks its workers ran
+        cluster = real(workers, threads_per_worker)
+        close = cluster.close
+
+        def close_counted(*args, **kwargs):
+            with distributed.Client(cluster) as client:
+                made.append((workers, sum(client.run(lambda dask_worker: dask_worker.state.executed_count).values())))
+            return close(*args, **kwargs)
+
+        cluster.close = close_counted
+        return cluster
+
+    monkeypatch.setattr(sweeps, "local_cluster", counted)
     assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
+    assert made == [(2, 3 * 2)]  # every task on the cluster the command made, and that cluster closed
     said = capsys.readouterr().out
     lines = said.splitlines()
     assert lines[0] == "sweep       3 points x 2 repeats on a local cluster of 2 worker processes, 2 threads each"
