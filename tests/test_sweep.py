@@ -53,6 +53,11 @@ def write(tmp_path, text, name="sweep.toml"):
     return path
 
 
+def executed(client):
+    """The tasks the workers of `client`'s cluster have run so far."""
+    return sum(client.run(lambda dask_worker: dask_worker.state.executed_count).values())
+
+
 def table(out):
     """{area_fraction: the row's numbers, as written} of out/results.csv."""
     with open(out / "results.csv", newline="") as file:
@@ -467,7 +472,7 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
 
         def close_counted(*args, **kwargs):
             with distributed.Client(cluster) as client:
-                made.append((workers, sum(client.run(lambda dask_worker: dask_worker.state.executed_count).values())))
+                made.append((workers, executed(client)))
             return close(*args, **kwargs)
 
         cluster.close = close_counted
@@ -514,13 +519,9 @@ def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys)
     sweep, serial_out = serial
     address = cluster.scheduler.address
     out = tmp_path / "out"
-
-    def executed():  # tasks run by that cluster's workers so far
-        return sum(cluster.run(lambda dask_worker: dask_worker.state.executed_count).values())
-
-    before = executed()
+    before = executed(cluster)
     assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--scheduler", address, "--out", str(out)]) == 0
-    assert executed() - before == 3 * 2  # every task on that cluster, not here or on a cluster of its own
+    assert executed(cluster) - before == 3 * 2  # every task on that cluster, not here or on a cluster of its own
     said = capsys.readouterr().out.splitlines()
     assert said[0] == f"sweep       3 points x 2 repeats on the Dask scheduler at {address}"
     assert said[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
