@@ -69,15 +69,15 @@ def main():
         order = f"{float(row['hexatic_order']):.3f}" if "hexatic_order" in row else ""
         lines.append(f"| {eta:.3f} | {start} | {measured:g} | {got:.4f} ± {se:.4f} | {published} | {z} | {order} | "
                      f"{float(row['task_seconds']):.0f} |")
-        longest[(start, round(eta, 6))] = (got, se)  # sorted by the time measured: the longest last
+        longest[(start, round(eta, 6))] = (got, se, measured)  # sorted by the time measured: the longest last
     lines.append("")
     for start in dict.fromkeys(start for start, _ in longest):
         if (start, 0.698) in longest and (start, 0.71) in longest:
-            (a, ea), (b, eb) = longest[(start, 0.698)], longest[(start, 0.71)]
+            (a, ea, _), (b, eb, _) = longest[(start, 0.698)], longest[(start, 0.71)]
             lines.append(f"Loop, start {start}: beta P d^2 at 0.698 minus at 0.710 = {a - b:+.4f}, "
                          f"{(a - b) / math.hypot(ea, eb):+.1f} combined standard errors.")
     if args.plot:
-        plot(points, longest, args.plot)
+        plot(points, {key: measured for key, (_, _, measured) in longest.items()}, args.plot)
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
@@ -86,7 +86,8 @@ def main():
 
 def plot(points, longest, path):
     """beta P d^2 against the area fraction: each start's rows, filled where the row is the
-    point's longest measurement, and the published series of the sweeps' N and box."""
+    point's longest measurement (`longest`: {(start, area fraction): time measured}), and the
+    published series of the sweeps' N and box."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -105,8 +106,8 @@ def plot(points, longest, path):
             shift = (k - 0.5) * 0.0006  # the starts side by side at each area fraction
             for best in (True, False):
                 rows = [(eta, float(row["reduced_pressure"]), float(row["reduced_pressure_se"]))
-                        for eta, s, _, _, _, row in points
-                        if s == start and (longest[(s, round(eta, 6))][0] == float(row["reduced_pressure"])) == best]
+                        for eta, s, measured, _, _, row in points
+                        if s == start and (measured == longest[(s, round(eta, 6))]) == best]
                 if rows:
                     ax.errorbar([r[0] + shift for r in rows], [r[1] for r in rows], yerr=[r[2] for r in rows],
                                 fmt="o", ms=4, capsize=2, color=f"C{k}", mfc=f"C{k}" if best else "white",
