@@ -296,7 +296,8 @@ def box_for_area_fraction(n, radius, fraction, aspect=DEFAULT_BOX[0] / DEFAULT_B
 def _species(value, n):
     """`species` as ((count, radius), ...) with the counts summing to n: from entries
     {count = C, radius = R} or {fraction = F, radius = R} (all counts or all fractions, the
-    fractions summing to 1; the last species takes what rounding leaves), or [C, R] pairs."""
+    fractions summing to 1; the last species takes what rounding leaves), or [C, R] pairs.
+    n is None for counts alone, which then fix it."""
     if not isinstance(value, (list, tuple)) or not value:
         raise ValueError(f"species = {value!r} must be a non-empty list of {{count = C, radius = R}} or "
                          "{fraction = F, radius = R} entries")
@@ -322,8 +323,6 @@ def _species(value, n):
         fractions = [_finite(f"species[{k}] fraction", f) for k, (_, f, _) in enumerate(entries)]
         if any(not 0 < f < 1 for f in fractions) or not math.isclose(sum(fractions), 1.0, rel_tol=1e-9):
             raise ValueError(f"species fractions {fractions} must each be between 0 and 1 and sum to 1")
-        if n is None:
-            raise ValueError("species given as fractions need n, the number of circles")
         counts = [round(f * n) for f in fractions[:-1]]
         counts.append(n - sum(counts))
         if any(c < 1 for c in counts):

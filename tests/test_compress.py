@@ -274,6 +274,12 @@ def test_species_give_each_count_its_radius_and_the_box_its_exact_area():
                   area_fraction=0.4)
     assert mixed.species == ((6, 0.5), (5, 0.7))  # round(5.5) = 6 (to even), the rest 5
     assert mixed.area_fraction == pytest.approx(0.4, rel=1e-12)
+    pairs = Scene.from_dict({"species": [[3, 0.5], [1, 0.7]], "box": [10.0, 4.0]})  # [count, radius] pairs
+    assert pairs == scene
+    three = [{"fraction": 0.2, "radius": 0.5}, {"fraction": 0.3, "radius": 0.6}, {"fraction": 0.5, "radius": 0.7}]
+    assert Scene(n=10, species=three, box=(20.0, 20.0)).species == ((2, 0.5), (3, 0.6), (5, 0.7))
+    single = [{"fraction": 0.25, "radius": 0.5}, {"fraction": 0.75, "radius": 0.6}]
+    assert Scene(n=4, species=single, box=(20.0, 20.0)).species == ((1, 0.5), (3, 0.6))  # one circle is a species
 
 
 @pytest.mark.parametrize("fields, message", [
@@ -288,6 +294,26 @@ def test_species_give_each_count_its_radius_and_the_box_its_exact_area():
     ({"species": [{"count": 2, "radius": -1.0}]}, "species[0] radius = -1.0 must be > 0"),
     ({"species": []}, "species = () must be a non-empty list of {count = C, radius = R} or {fraction = F, "
                       "radius = R} entries"),
+    ({"species": [[2, 1.0, 3]]}, "species[0] = [2, 1.0, 3] must be {count = C, radius = R} or {fraction = F, "
+                                 "radius = R}"),
+    ({"species": [{"count": 2}]}, "species[0] = {'count': 2} must be {count = C, radius = R} or {fraction = F, "
+                                  "radius = R}"),
+    ({"species": [5]}, "species[0] = 5 must be {count = C, radius = R} or {fraction = F, radius = R}"),
+    ({"species": [{"count": 2, "radius": 0.0}]}, "species[0] radius = 0.0 must be > 0"),
+    ({"species": [{"count": 2, "radius": "a"}]}, "species[0] radius = 'a' is not a number"),
+    ({"species": [{"count": 0, "radius": 1.0}, {"count": 2, "radius": 1.0}]},
+     "species counts [0, 2] must each be >= 1"),
+    ({"species": [{"count": 1.5, "radius": 1.0}]}, "species[0] count = 1.5 must be a whole number >= 0"),
+    ({"n": 5, "species": [{"count": 2, "radius": 1.0}, {"count": 1, "radius": 1.0}]},
+     "n = 5 but the species count 2 + 1 = 3 circles: give n = 3, or leave n out"),
+    ({"n": 4, "species": [{"fraction": "x", "radius": 1.0}]}, "species[0] fraction = 'x' is not a number"),
+    ({"n": 4, "species": [{"fraction": 0.0, "radius": 1.0}, {"fraction": 0.5, "radius": 1.0},
+                          {"fraction": 0.5, "radius": 1.0}]},
+     "species fractions [0.0, 0.5, 0.5] must each be between 0 and 1 and sum to 1"),
+    ({"n": 4, "species": [{"fraction": 1.0, "radius": 1.0}]},
+     "species fractions [1.0] must each be between 0 and 1 and sum to 1"),
+    ({"n": 3, "species": [{"fraction": 0.1, "radius": 1.0}, {"fraction": 0.9, "radius": 1.0}]},
+     "species fractions [0.1, 0.9] of n = 3 leave a species with no circle: give more circles or counts"),
 ])
 def test_bad_species_are_refused_in_one_line(fields, message):
     with pytest.raises(ValueError) as refused:

@@ -522,6 +522,24 @@ def test_the_box_suggested_beyond_the_densest_packing_holds_the_circles_at_half_
         assert len(f"{w:g}".replace(".", "").strip("0")) <= 3 and len(f"{h:g}".replace(".", "").strip("0")) <= 3
 
 
+@pytest.mark.parametrize("x, rounded", [
+    (0.12345, 0.124), (1234.5, 1240.0), (999.9, 1000.0), (3.4567e-7, 3.46e-7),
+    (1.5, 1.5), (150.0, 150.0),  # already 3 digits: kept, not raised by a unit for their round-off
+    (0.0, 0.0), (-1.0, -1.0),  # no side to round: as given
+])
+def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
+    from circles.scene import _round_up
+
+    assert _round_up(x) == pytest.approx(rounded, rel=1e-12)
+    assert x <= 0 or _round_up(x) >= x * (1 - 1e-12)  # up, never down
+
+
+def test_a_side_that_is_no_finite_number_is_left_as_it_is():
+    from circles.scene import _round_up
+
+    assert _round_up(math.inf) == math.inf and math.isnan(_round_up(math.nan))
+
+
 def test_a_scene_file_that_cannot_be_read_is_named_with_the_reason(tmp_path):
     from circles.scene import Scene
 
