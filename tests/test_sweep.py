@@ -644,7 +644,10 @@ def test_the_sweep_command_is_described_in_the_command_lines_help(capsys):
     assert cli.main(["--help"]) == 0
     assert re.search(r"^ +sweep +run many scenes on Dask and measure each$", capsys.readouterr().out, re.M)
     assert cli.main(["sweep", "--help"]) == 0
-    text = " ".join(capsys.readouterr().out.split())
+    shown = capsys.readouterr().out
+    assert re.search(r"^usage: circles sweep \[-h\] .*\n +SWEEP\.toml\n", shown, re.M)  # the file named as one
+    assert re.search(r"^  SWEEP\.toml +sweep file: \[scene\], \[vary\] and \[sweep\] tables$", shown, re.M)
+    text = " ".join(shown.split())
     for words in ("sweep file: [scene], [vary] and [sweep] tables", sweeps.DESCRIPTION.split(".")[0],
                   "--workers N worker processes of the local cluster (default: one per core; 0 runs the tasks one by "
                   "one in this process, without Dask)", "--scheduler ADDRESS the address of a running Dask scheduler",
@@ -665,6 +668,8 @@ def test_a_local_cluster_shares_out_the_cores_and_says_so(cores, workers, thread
 
 
 def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread():
+    import logging
+
     cluster = sweeps.local_cluster(1)  # one thread by default; Dask alone would make a worker per core here
     try:
         client = distributed.Client(cluster)
@@ -673,6 +678,8 @@ def test_a_local_cluster_has_the_workers_asked_for_each_a_process_of_one_thread(
         assert worker["nthreads"] == 1
         assert client.run(os.getpid)[address] != os.getpid()  # a process of its own
         assert cluster.dashboard_link and ":8787" not in cluster.dashboard_link  # a free port, not the default
+        levels = client.run(lambda: [h.level for h in logging.getLogger("distributed").handlers])[address]
+        assert levels and set(levels) == {logging.ERROR}  # quiet workers: no warnings of theirs on the terminal
         client.close()
     finally:
         cluster.close()
@@ -830,24 +837,24 @@ def tomllib_loads(text):
 
 
 def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, tmp_path, capsys, monkeypatch):
-    """A task stopped after its second checkpoint (an exception here, a dead worker on a
+    """A task stopped after its first checkpoint (an exception here, a dead worker on a
     cluster): the rerun of the command goes on from it and says so."""
     import re
 
     from circles import checkpoint
 
     path = write(tmp_path, CHECKPOINTED.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]")
-                 .replace("repeats = 2", "repeats = 1"))
+                 .replace("repeats = 2", "repeats = 1").replace("checkpoint_every = 1.4", "checkpoint_every = 0.7"))
     out = tmp_path / "out"
     real, calls = checkpoint.write, []
 
-    def dies_after_the_second(*a, **k):
+    def dies_after_the_first(*a, **k):  # at time 0.7: a task that went on from before time 1 counts too
         real(*a, **k)
         calls.append(1)
-        if len(calls) == 2:
+        if len(calls) == 1:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(checkpoint, "write", dies_after_the_second)
+    monkeypatch.setattr(checkpoint, "write", dies_after_the_first)
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 130
     assert (out / sweeps.CHECKPOINTS / "point-0-repeat-0.gsd").exists()
     monkeypatch.setattr(checkpoint, "write", real)
@@ -857,6 +864,61 @@ def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, 
     assert re.fullmatch(r"done        1 points run, 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
                         r"checkpoint: 1", done[0])
     assert not (out / sweeps.CHECKPOINTS).exists()
+
+
+def test_a_run_keeps_a_checkpoint_none_of_its_tasks_took_and_times_itself_and_its_tasks(circles_cpu, tmp_path):
+    """A .gsd in DIR/checkpoints that no task of the run wrote (a point since dropped from the
+    file) is kept, with its folder; the run's wall time and each task's seconds lie within the
+    time measured around it; a sweep without checkpoint_every makes no checkpoint folder at all."""
+    import time
+
+    one = CHECKPOINTED.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]").replace("repeats = 2",
+                                                                                                   "repeats = 1")
+    sweep = sweeps.read_sweep(write(tmp_path, one))
+    out = tmp_path / "out"
+    stale = out / sweeps.CHECKPOINTS / "point-5-repeat-0.gsd"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"not this run's")
+    before = time.perf_counter()
+    run = sweeps.run_sweep(sweep, out)
+    elapsed = time.perf_counter() - before
+    assert os.listdir(stale.parent) == [stale.name] and stale.read_bytes() == b"not this run's"
+    assert 0 < run.wall_s <= elapsed
+    (result,) = run.results.values()
+    assert 0 < result["seconds"] <= run.wall_s
+    plain = sweeps.read_sweep(write(tmp_path, TINY.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]"),
+                                    "plain.toml"))
+    seen = []
+    sweeps.run_sweep(plain, tmp_path / "plain", on_result=lambda task, result: seen.append(
+        (task, os.path.exists(tmp_path / "plain" / sweeps.CHECKPOINTS))))
+    assert seen == [((0, 0), False), ((0, 1), False)]
+
+
+def test_the_command_says_once_that_kernels_compile_and_names_each_varied_field(circles_cpu, tmp_path, capsys,
+                                                                                monkeypatch):
+    """With an empty kernel list (`circles.kernel_cache`), `circles sweep` says on stderr that
+    kernels compile, once, and lists the kind of its first task's scene on the CPU with the
+    threads it runs on (0: all, for tasks in this process). A point's line names each varied
+    field; a sweep without compressibility or reduced pressure has no line comparing them."""
+    import re
+
+    from circles import kernel_cache
+    from circles.scene import Scene
+
+    monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "cache"))  # Taichi itself is started already
+    text = (TINY.replace("area_fraction = [0.1, 0.3, 0.5]", 'area_fraction = [0.3]\nboundary = ["periodic"]')
+            .replace('observables = ["compressibility", "collision_rate", "energy_change"]',
+                     'observables = ["energy_change"]'))
+    path = write(tmp_path, text)
+    sweep = sweeps.read_sweep(path)
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(tmp_path / "out")]) == 0
+    said = capsys.readouterr()
+    assert said.err == kernel_cache.MESSAGE + "\n"
+    listed = (tmp_path / "cache" / kernel_cache.SEEN).read_text().split()
+    assert listed == [kernel_cache.kind_of(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", 0)]
+    lines = said.out.splitlines()
+    assert [line.split()[0] for line in lines] == ["sweep", "point", "done", "plots"]
+    assert re.fullmatch(r'point       area_fraction 0\.3, boundary "periodic": energy_change \S+ \+- \S+', lines[1])
 
 
 def test_a_figure_holds_the_points_their_errors_and_the_theory_curve(serial):
@@ -1138,6 +1200,12 @@ def test_a_square_box_sweep_is_compared_with_the_published_pressures_of_its_own_
     found = sweeps.theory(sweep, {"area_fraction": 0.700}, {"temperature": "0.5"})
     assert (found["reduced_pressure"], found["reduced_pressure_se"]) == (8.6876, 0.0012)
     assert "reduced_pressure" not in sweeps.theory(sweep, {"area_fraction": 0.701}, {"temperature": "0.5"})
+    import matplotlib.pyplot as plt
+
+    rows = [({"area_fraction": eta}, {"reduced_pressure": "8.7", "reduced_pressure_se": "0.01"}) for eta in (0.7, 0.701)]
+    fig = sweeps.sweep_figure(sweep, rows, "reduced_pressure")
+    assert fig.axes[0].get_legend_handles_labels()[1] == ["measured", "Li2022 (ECMC), N = 224"]  # no Engel et al.
+    plt.close(fig)
 
 
 def test_a_points_fields_put_its_values_over_the_base_and_its_seed(tmp_path):
