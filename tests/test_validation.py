@@ -534,6 +534,16 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     assert x <= 0 or _round_up(x) >= x * (1 - 1e-12)  # up, never down
 
 
+def test_a_crystal_scene_goes_to_a_dict_and_back():
+    from circles.scene import Scene
+
+    scene = Scene(n=224, crystal=(16, 14), radius=0.5, area_fraction=0.7, boundary="periodic", mass="equal",
+                  start="crystal")
+    d = scene.to_dict()
+    assert d["crystal"] == [16, 14] and "area_fraction" not in d and "species" not in d
+    assert Scene.from_dict(d) == scene
+
+
 def test_a_side_that_is_no_finite_number_is_left_as_it_is():
     from circles.scene import _round_up
 
@@ -553,6 +563,9 @@ def test_a_scene_file_that_cannot_be_read_is_named_with_the_reason(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("n = \n")
     refused(lambda: Scene.from_toml(bad), "^" + re.escape(f"{bad}: not valid TOML (") + r".+\)$")
+    under_a_file = tmp_path / "latin.toml" / "scene.toml"  # a path through a file: an OSError of its own
+    refused(lambda: Scene.from_toml(under_a_file),
+            f"^cannot read scene file {re.escape(str(under_a_file))}: Not a directory$")
     if os.geteuid() != 0:  # root reads any file
         locked = tmp_path / "locked.toml"
         locked.write_text("n = 10\n")
