@@ -459,20 +459,30 @@ def test_repeat_seeds_are_distinct_and_fixed_by_the_base_seed():
 def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_path, capsys, monkeypatch):
     """`circles sweep` end to end: its own cluster of two workers, the serial numbers, a plot per
     observable, and Liu's deviation said; run again, every point is skipped. On a machine of
-    four cores (as the command sees it), each worker gets two threads."""
+    four cores (as the command sees it), each worker runs Taichi on two threads, and the kernel
+    note is of the CPU with two threads."""
+    from circles import kernel_cache
+    from circles.scene import Scene
+
     sweep, serial_out = serial
     path = write(tmp_path, TINY)
     out = tmp_path / "out"
     monkeypatch.setattr(sweeps.os, "cpu_count", lambda: 4)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: str(tmp_path / "cache"))  # this process's list only
     made, real = [], sweeps.local_cluster
 
-    def counted(workers, threads_per_worker=1):  # the cluster made, and the tasks its workers ran
+    def taichi_threads(dask_worker):  # of a worker that ran a task, and so started Taichi
+        import taichi as ti
+
+        return ti.lang.impl.current_cfg().cpu_max_num_threads if dask_worker.state.executed_count else None
+
+    def counted(workers, threads_per_worker=1):  # the cluster made, the tasks its workers ran, their threads
         cluster = real(workers, threads_per_worker)
         close = cluster.close
 
         def close_counted(*args, **kwargs):
             with distributed.Client(cluster) as client:
-                made.append((workers, executed(client)))
+                made.append((workers, executed(client), set(client.run(taichi_threads).values()) - {None}))
             return close(*args, **kwargs)
 
         cluster.close = close_counted
@@ -480,7 +490,9 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
 
     monkeypatch.setattr(sweeps, "local_cluster", counted)
     assert sweeps.main(["sweep", str(path), "--workers", "2", "--out", str(out)]) == 0
-    assert made == [(2, 3 * 2)]  # every task on the cluster the command made, and that cluster closed
+    assert made == [(2, 3 * 2, {2})]  # every task on the cluster the command made, and that cluster closed
+    listed = (tmp_path / "cache" / kernel_cache.SEEN).read_text().split()
+    assert listed == [kernel_cache.kind_of(Scene.from_dict(sweep.point_scene(0, 0)), "cpu", 2)]
     said = capsys.readouterr().out
     lines = said.splitlines()
     assert lines[0] == "sweep       3 points x 2 repeats on a local cluster of 2 worker processes, 2 threads each"
