@@ -901,9 +901,10 @@ def test_a_run_keeps_a_checkpoint_none_of_its_tasks_took_and_times_itself_and_it
     plain = sweeps.read_sweep(write(tmp_path, TINY.replace("area_fraction = [0.1, 0.3, 0.5]", "area_fraction = [0.3]"),
                                     "plain.toml"))
     seen = []
-    sweeps.run_sweep(plain, tmp_path / "plain", on_result=lambda task, result: seen.append(
-        (task, os.path.exists(tmp_path / "plain" / sweeps.CHECKPOINTS))))
-    assert seen == [((0, 0), False), ((0, 1), False)]
+    ran = sweeps.run_sweep(plain, tmp_path / "plain", on_result=lambda task, result: seen.append(
+        (task, result, os.path.exists(tmp_path / "plain" / sweeps.CHECKPOINTS))))
+    assert seen == [((0, 0), ran.results[0, 0], False), ((0, 1), ran.results[0, 1], False)]
+    assert all(isinstance(result, dict) for _, result, _ in seen)
 
 
 def test_the_command_says_once_that_kernels_compile_and_names_each_varied_field(circles_cpu, tmp_path, capsys,

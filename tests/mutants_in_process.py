@@ -1,0 +1,78 @@
+"""Run mutmut's mutants in one process: for each, switch it on and run the tests that reach its
+function (from mutmut's stats), stopping at the first failure.
+
+mutmut forks a child a mutant, and each child starts Taichi and loads the kernels its tests
+use: seconds a mutant before any test runs. Here Taichi starts once and the kernels stay
+loaded, so a mutant costs only its tests. Use it for modules with many mutants whose tests run
+simulations (`scene`). Run it in mutmut's folder, after `mutmut run` has made the mutants and
+its stats (a run stopped at once will do):
+
+    cd mutants
+    python tests/mutants_in_process.py NAMES.txt RESULTS.txt [EXTRA_TEST ...]
+
+NAMES.txt holds a mutant name a line (`mutmut results --all true`); each line of RESULTS.txt
+is "NAME killed|survived|timeout|error-STATUS SECONDS" (an endless loop is stopped by an alarm
+and fails its test; an error: pytest found no such test, say), and a rerun skips the names it
+holds. EXTRA_TEST:
+tests run for every mutant after its own (tests added since the stats were taken). Tests
+that start processes of their own (a Dask cluster, the command line) do not see the mutant.
+"""
+import json
+import os
+import signal
+import sys
+import time
+
+import pytest
+
+#: Test files tried first: those of the refusals, which kill most mutants of a scene's checks.
+FIRST = {"tests/test_validation.py": 0, "tests/test_compress.py": 1, "tests/test_file_fuzz.py": 2}
+
+
+class _Timeout(Exception):
+    pass
+
+
+def _alarm(*_):
+    raise _Timeout()
+
+
+def main(names_file, results_file, extra):
+    names = [line.strip() for line in open(names_file) if line.strip()]
+    done = set()
+    if os.path.exists(results_file):
+        done = {line.split()[0] for line in open(results_file) if line.strip()}
+    stats = json.load(open("mutmut-stats.json"))
+    by_function, duration = stats["tests_by_mangled_function_name"], stats["duration_by_test"]
+    signal.signal(signal.SIGALRM, _alarm)
+    with open(results_file, "a", buffering=1) as out:
+        for name in (n for n in names if n not in done):
+            function = name.split("__mutmut_")[0]
+            tests = sorted(by_function.get(function, []),
+                           key=lambda t: (FIRST.get(t.split("::")[0], len(FIRST)), duration.get(t, 0.0)))
+            tests += [t for t in extra if t not in tests]
+            if not tests:
+                out.write(f"{name} no-tests 0\n")
+                continue
+            os.environ["MUTANT_UNDER_TEST"] = name
+            start = time.perf_counter()
+            signal.alarm(int(3 * sum(duration.get(t, 1.0) for t in tests)) + 60)  # an endless loop
+            try:
+                status = pytest.main(["-x", "-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider",
+                                      "-p", "no:warnings", "--no-header", "-o", "addopts=", *tests])
+            except _Timeout:
+                status = "timeout"
+            finally:
+                signal.alarm(0)
+                os.environ["MUTANT_UNDER_TEST"] = ""
+            if status == pytest.ExitCode.INTERRUPTED:
+                raise KeyboardInterrupt  # Ctrl-C: this mutant is not done
+            verdict = {pytest.ExitCode.OK: "survived", pytest.ExitCode.TESTS_FAILED: "killed", "timeout": "timeout"}
+            # any other status (a test not found, no test collected) is no verdict: say so
+            out.write(f"{name} {verdict.get(status, f'error-{status}')} {time.perf_counter() - start:.1f}\n")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    main(sys.argv[1], sys.argv[2], sys.argv[3:])
