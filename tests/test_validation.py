@@ -534,6 +534,33 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     assert x <= 0 or _round_up(x) >= x * (1 - 1e-12)  # up, never down
 
 
+@pytest.mark.parametrize("fields, message", [
+    ({"radius": math.inf}, "radius = inf is not finite: give a finite number"),
+    ({"radius": (1, 2, 3)}, "radius = (1, 2, 3) must be a number or a pair (min, max)"),
+    ({"radius": ("ab", 0.1)}, "radius = 'ab' is not a number"),
+    ({"radius": (0.1, "b")}, "radius = 'b' is not a number"),
+    ({"radius": (0.1, 0.05)}, "radius = (0.1, 0.05): max 0.05 is below min 0.1"),
+    ({"radius": -0.1}, "radius = -0.1: the smallest value -0.1 is out of range (must be > 0)"),
+    ({"speed": (-1.0, 1.0)}, "speed = (-1.0, 1.0): the smallest value -1.0 is out of range (must be >= 0)"),
+    ({"speed": ("x", 1.0)}, "speed = 'x' is not a number"),
+])
+def test_a_number_or_a_pair_is_refused_word_for_word(fields, message):
+    from circles.scene import Scene
+
+    with pytest.raises(ValueError) as refused_:
+        Scene(n=10, box=(4.0, 4.0), **fields)
+    assert str(refused_.value) == message
+
+
+def test_numpy_scalars_are_taken_as_numbers():
+    import numpy as np
+
+    from circles.scene import Scene
+
+    scene = Scene(n=np.array(40), radius=np.array(0.05), box=(np.float64(4.0), 4.0), seed=np.int64(3))
+    assert scene == Scene(n=40, radius=0.05, box=(4.0, 4.0), seed=3) and type(scene.n) is int
+
+
 def test_a_crystal_scene_goes_to_a_dict_and_back():
     from circles.scene import Scene
 
