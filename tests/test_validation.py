@@ -561,6 +561,16 @@ def test_numpy_scalars_are_taken_as_numbers():
     assert scene == Scene(n=40, radius=0.05, box=(4.0, 4.0), seed=3) and type(scene.n) is int
 
 
+def test_the_rounding_margin_is_four_units_in_the_last_place_of_the_longer_side():
+    """4 eps of the longer side, eps = 2^-24 in float32 and 2^-53 in float64: a bound, with
+    room, on how far rounding a position to the precision and wrapping it move it."""
+    from circles.scene import rounding_margin
+
+    assert rounding_margin((3.0, 5.0), True) == 5.0 * 4 * 2.0 ** -24
+    assert rounding_margin((3.0, 5.0), False) == 5.0 * 4 * 2.0 ** -53
+    assert rounding_margin((1e300, 2.0), False) == 1e300 * 4 * 2.0 ** -53  # finite for any finite box
+
+
 def test_a_crystal_scene_goes_to_a_dict_and_back():
     from circles.scene import Scene
 
