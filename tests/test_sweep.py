@@ -1091,8 +1091,9 @@ def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circl
     """run_task's blocks against a Simulation of the same scene advanced to the same instants,
     each value written out here from its definition: in a walled box P = (N kT + virial / 2t)
     / ((W - 2r)(H - 2r)) and the walls' impulse over t (2 (W - 2r) + 2 (H - 2r)), r the mean
-    radius; kT = K / N; the energy change over the first kinetic energy. In a periodic box,
-    |psi_6| at each block's end from freud."""
+    radius; kT = K / N; the energy change over the first kinetic energy (none without one);
+    no reduced pressure where the radii differ. In a periodic box, |psi_6| at each block's end
+    from freud."""
     import freud
 
     from circles.scene import Scene
@@ -1105,6 +1106,21 @@ def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circl
         result = sweeps.run_task(fields, 0.5, 2.0, blocks, kept=("pressure", "wall_pressure", "temperature"),
                                  checkpoint=None if every is None else str(tmp_path / "task.gsd"), every=every)
         check_blocks(result, fields, ends)
+
+    assert all(math.isnan(v) for v in result["blocks"]["reduced_pressure"])  # no diameter: radii differ
+
+    # In float32 the energy changes by round-off: a change to see, its ratio to the first energy.
+    stepped = {**fields, "scheme": "discrete", "dt": 0.01, "precision": "f32"}
+    result = sweeps.run_task(stepped, 0.5, 2.0, 1)
+    sim = Simulation(Scene.from_dict(stepped))
+    e0 = sim.stats()["kinetic_energy"]
+    sim.advance(0.5)
+    before = sim.stats()["kinetic_energy"]
+    sim.advance(2.0)
+    change = (sim.stats()["kinetic_energy"] - before) / e0
+    assert abs(change) > 1e-9 and result["blocks"]["energy_change"] == [pytest.approx(change, rel=1e-9)]
+    still = {"n": 10, "radius": 0.1, "box": [4.0, 4.0], "speed": [0.0, 0.0], "boundary": "walls", "seed": 2}
+    assert sweeps.run_task(still, 0.0, 1.0, 1)["blocks"]["energy_change"] == [0.0]  # no energy to compare with
 
     fields = {"n": 200, "radius": 0.1, "area_fraction": 0.6, "speed": [1.0, 1.0], "mass": "equal",
               "boundary": "periodic", "seed": 2}
