@@ -12,8 +12,9 @@ its stats (a run stopped at once will do):
 
 NAMES.txt holds a mutant name a line (`mutmut results --all true`); each line of RESULTS.txt
 is "NAME killed|survived|timeout|error-STATUS SECONDS" (an endless loop is stopped by an alarm
-and fails its test; an error: pytest found no such test, say), and a rerun skips the names it
-holds. EXTRA_TEST:
+and fails its test; an error: pytest found no such test, say). A mutant RESULTS.txt holds is
+skipped, so a rerun goes on where it stopped, and two processes sharing one RESULTS.txt (one
+given NAMES.txt in reverse) split the work. EXTRA_TEST:
 tests run for every mutant after its own (tests added since the stats were taken). Tests
 that start processes of their own (a Dask cluster, the command line) do not see the mutant.
 """
@@ -37,16 +38,20 @@ def _alarm(*_):
     raise _Timeout()
 
 
+def _done(results_file):
+    with open(results_file) as file:
+        return {line.split()[0] for line in file if line.strip()}
+
+
 def main(names_file, results_file, extra):
     names = [line.strip() for line in open(names_file) if line.strip()]
-    done = set()
-    if os.path.exists(results_file):
-        done = {line.split()[0] for line in open(results_file) if line.strip()}
     stats = json.load(open("mutmut-stats.json"))
     by_function, duration = stats["tests_by_mangled_function_name"], stats["duration_by_test"]
     signal.signal(signal.SIGALRM, _alarm)
     with open(results_file, "a", buffering=1) as out:
-        for name in (n for n in names if n not in done):
+        for name in names:
+            if name in _done(results_file):  # by this process, or by another sharing the file
+                continue
             function = name.split("__mutmut_")[0]
             tests = sorted(by_function.get(function, []),
                            key=lambda t: (FIRST.get(t.split("::")[0], len(FIRST)), duration.get(t, 0.0)))
