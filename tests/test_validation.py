@@ -571,6 +571,41 @@ def test_the_rounding_margin_is_four_units_in_the_last_place_of_the_longer_side(
     assert rounding_margin((1e300, 2.0), False) == 1e300 * 4 * 2.0 ** -53  # finite for any finite box
 
 
+@pytest.mark.parametrize("precision, eps", [("f32", 2.0 ** -24), ("f64", 2.0 ** -53)])
+def test_room_to_place_ends_exactly_at_the_side(precision, eps):
+    """A walled box's side must hold the diameter, twice the placement's clearance of it and
+    twice the rounding margin (4 eps of the longer side): a radius that makes the sum the side
+    exactly fits, and one that does not is told the largest that does, worked out here. A box
+    whose rounding margins alone fill the side is too thin; one a little wider is not."""
+    from circles.scene import PLACE_CLEARANCE, check_room
+
+    rounding = 4 * eps * 1.0
+    limit = (1.0 - 2 * rounding) / (2 * (1 + 2 * PLACE_CLEARANCE))
+    near, down, up = [limit], limit, limit  # the floats around it
+    for _ in range(40):
+        down, up = math.nextafter(down, 0.0), math.nextafter(up, 1.0)
+        near += [down, up]
+    exact = [y for y in near if 2 * y * (1 + 2 * PLACE_CLEARANCE) + 2 * rounding == 1.0]
+    assert exact
+    check_room(max(exact), (1.0, 1.0), "walls", precision)  # no error: it fits exactly
+    with pytest.raises(ValueError) as refused_:
+        check_room(0.5, (1.0, 1.0), "walls", precision)
+    most = float(f"{limit * (1 - 1e-8):.9g}")
+    assert str(refused_.value) == (
+        f"radius 0.5 leaves no room to place the circle at random in the box 1.0 x 1.0 (its diameter, with a "
+        f"clearance of 2e-06 of it for rounding, must fit the side 1.0): use a radius of at most {most:.9g}, a bigger "
+        "box, or give the places yourself with Simulation.from_arrays")
+    wide = 2.0 ** 20
+    margin = 4 * eps * wide
+    fix = "use a box whose sides differ less" + (", or precision 'f64'" if precision == "f32" else "")
+    with pytest.raises(ValueError) as refused_:
+        check_room(margin, (wide, 2 * margin), "walls", precision)
+    assert "is too thin to place circles at random" in str(refused_.value) and str(refused_.value).endswith(fix)
+    with pytest.raises(ValueError) as refused_:
+        check_room(margin, (wide, 2.5 * margin), "walls", precision)
+    assert "leaves no room to place the circle" in str(refused_.value)
+
+
 def test_a_crystal_scene_goes_to_a_dict_and_back():
     from circles.scene import Scene
 
