@@ -1137,6 +1137,27 @@ def test_a_tasks_blocks_are_the_identities_of_the_same_run_worked_out_here(circl
                                                                          abs=1e-6)
 
 
+def test_a_task_keeps_a_checkpoint_every_so_often_and_none_after_its_last_piece(circles_cpu, tmp_path, monkeypatch):
+    """Pieces 1.4, 2.8, 3.0 (equilibration) and 5, 7, 9 (blocks), every = 1.4: a checkpoint at
+    the end of each piece 1.4 or more after the last one (1.4, 2.8, 5, 7), none after the task's
+    last piece, and none left when the task ends."""
+    from circles import checkpoint
+
+    written, real = [], checkpoint.write
+
+    def counted(path, sim, progress):
+        written.append((sim.time, progress["piece"]))
+        return real(path, sim, progress)
+
+    monkeypatch.setattr(checkpoint, "write", counted)
+    fields = {"n": 40, "radius": 0.05, "box": [2.0, 2.0], "speed": [1.0, 1.0], "boundary": "periodic", "seed": 2}
+    path = tmp_path / "task.gsd"
+    sweeps.run_task(fields, 3.0, 6.0, 3, checkpoint=str(path), every=1.4)
+    assert [t for t, _ in written] == pytest.approx([1.4, 2.8, 5.0, 7.0], abs=1e-12)
+    assert [piece for _, piece in written] == [1, 2, 4, 5]  # the piece to go on from
+    assert not path.exists()
+
+
 def check_blocks(result, fields, ends):
     """Each block of `result` against the identities of a Simulation of `fields` equilibrated
     for 0.5 and measured to each of `ends` (see the test above)."""
