@@ -1186,6 +1186,31 @@ def check_blocks(result, fields, ends):
         before = after
 
 
+def test_a_figure_labels_each_group_by_its_other_fields_and_draws_theory_through_two_points_or_more():
+    """A group of points is labelled by the values of the fields varied besides the x axis, a
+    comma between; Liu's curve goes through two points or more, not one; caps 2 points wide (a
+    cap's marker is twice that); 100 dots an inch whatever matplotlib's default; a sweep made
+    without a file is titled "sweep"."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    text = TINY.replace("area_fraction = [0.1, 0.3, 0.5]", 'area_fraction = [0.1, 0.3]\nmass = ["equal"]\n'
+                                                           'speed = [[1.0, 1.0], [0.5, 1.0]]')
+    sweep = sweeps.sweep_from_dict(tomllib_loads(text))
+    row = {"compressibility": "1.2", "compressibility_se": "0.01", "temperature": "0.5"}
+    rows = [({"area_fraction": 0.1, "mass": "equal", "speed": [1.0, 1.0]}, row),
+            ({"area_fraction": 0.3, "mass": "equal", "speed": [1.0, 1.0]}, row),
+            ({"area_fraction": 0.1, "mass": "equal", "speed": [0.5, 1.0]}, row)]
+    with matplotlib.rc_context({"figure.dpi": 72}):
+        fig = sweeps.sweep_figure(sweep, rows, "compressibility")
+    (ax,) = fig.axes
+    assert fig.dpi == 100 and ax.get_title() == "sweep"
+    assert ax.get_legend_handles_labels()[1] == ["Liu", 'mass "equal", speed [1.0, 1.0]',
+                                                 'mass "equal", speed [0.5, 1.0]']  # one curve: the group of two
+    assert ax.containers[0].lines[1][0].get_markersize() == 4
+    plt.close(fig)
+
+
 def test_a_figure_places_ranges_at_their_low_end_and_words_as_categories(tmp_path):
     """The x axis of a sweep's figure: a varied range ([low, high]) at its low end, a number as it
     is; a varied word (the boundary) as a category named by it."""
