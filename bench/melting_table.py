@@ -3,8 +3,10 @@
     python bench/melting_table.py [--sweep SWEEP.toml RESULTS_DIR]... [--date YYYY-MM-DD] [--out FILE.md]
                                   [--plot FILE.png]
 
-Default: scenes/melting_sweep.toml with outputs/melting_sweep, and
-scenes/melting_coexistence.toml with outputs/melting_coexistence where that has results. Prints
+Default: scenes/melting_sweep.toml with outputs/melting_sweep, and each of
+scenes/melting_coexistence.toml and scenes/melting_coexistence_more.toml with its folder in
+outputs/ where that has results; rows of one point measured alike in several sweeps are joined
+(`join`). Prints
 a Markdown table: each point's beta P d^2 with its standard error, the simulated time measured
 per start and the tasks' wall time, the published value at that area fraction
 (`circles.reference`), their difference in combined standard errors, the hexatic order; then
@@ -14,6 +16,7 @@ every row with Li et al.'s series: the longest measurement of each point filled,
 open.
 """
 import argparse
+import json
 import math
 import os
 import sys
@@ -27,7 +30,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 from circles import sweep as sweeps  # noqa: E402
 
 DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep"),
-           ("scenes/melting_coexistence.toml", "outputs/melting_coexistence")]
+           ("scenes/melting_coexistence.toml", "outputs/melting_coexistence"),
+           ("scenes/melting_coexistence_more.toml", "outputs/melting_coexistence_more")]
 
 
 def main():
@@ -50,6 +54,7 @@ def main():
         for values, row in sweeps.load_rows(results, sweep):
             points.append((float(values["area_fraction"]), values.get("start", ""), sweep.repeats * sweep.measure,
                            sweep, values, row))
+    points = join(points)
     lines = [f"{cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, a task a core, {args.date}: "
              + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
              + "; ".join(words for _, words in runs) + ". Measured: the simulated time measured per start, all "
@@ -82,6 +87,30 @@ def main():
     print(text)
     if args.out:
         Path(args.out).write_text(text)
+
+
+def join(points):
+    """Rows of one point measured alike in several sweeps (the same scene but for its seed, the
+    same equilibration, blocks and block length) as one row of their whole measured time: the
+    mean over all their blocks, each row weighted by its time measured, and the standard error
+    of that mean; their tasks' seconds added. Other rows as they are."""
+    groups = {}
+    for point in points:
+        eta, start, _, sweep, _, _ = point
+        scene = json.dumps({k: v for k, v in sweep.scene.items() if k != "seed"}, sort_keys=True)
+        key = (round(eta, 6), start, scene, sweep.equilibrate, sweep.measure, sweep.blocks, sweep.observables)
+        groups.setdefault(key, []).append(point)
+    joined = []
+    for members in groups.values():
+        eta, start, _, sweep, values, first = members[0]
+        total = sum(m[2] for m in members)
+        row = dict(first)
+        for name in sweep.observables:
+            row[name] = repr(sum(m[2] * float(m[5][name]) for m in members) / total)
+            row[f"{name}_se"] = repr(math.sqrt(sum((m[2] * float(m[5][f"{name}_se"])) ** 2 for m in members)) / total)
+        row["task_seconds"] = repr(sum(float(m[5]["task_seconds"]) for m in members))
+        joined.append((eta, start, total, sweep, values, row) if len(members) > 1 else members[0])
+    return joined
 
 
 def plot(points, longest, path):

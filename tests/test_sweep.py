@@ -1429,3 +1429,35 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert all(point in melting.points for point in longer.points) and len(longer.points) == 4
     assert longer.repeats * longer.measure == 5 * melting.repeats * melting.measure
     assert (longer.equilibrate, longer.observables) == (melting.equilibrate, melting.observables)
+
+
+def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_whole_time(tmp_path):
+    """bench/melting_table.py: two sweeps of one point measured alike (seeds apart) give one row:
+    the mean over all their blocks (each row weighted by its time measured) and its standard
+    error, worked out here; a point measured otherwise keeps its own row."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "bench"))
+    spec = importlib.util.spec_from_file_location("melting_table", root / "bench" / "melting_table.py")
+    table_ = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(table_)
+    text = (TINY.replace('observables = ["compressibility", "collision_rate", "energy_change"]',
+                         'observables = ["compressibility"]'))
+    a = sweeps.read_sweep(write(tmp_path, text, "a.toml"))
+    b = sweeps.read_sweep(write(tmp_path, text.replace("seed = 3", "seed = 4").replace("repeats = 2", "repeats = 6"),
+                                "b.toml"))
+    shorter = sweeps.read_sweep(write(tmp_path, text.replace("measure = 2.0", "measure = 1.0"), "c.toml"))
+    row = lambda z, se, s: {"compressibility": str(z), "compressibility_se": str(se), "task_seconds": str(s)}  # noqa: E731
+    values = {"area_fraction": 0.3}
+    points = [(0.3, "", 4.0, a, values, row(2.0, 0.3, 10.0)), (0.3, "", 12.0, b, values, row(3.0, 0.1, 30.0)),
+              (0.3, "", 2.0, shorter, values, row(9.0, 1.0, 5.0))]
+    (eta, start, measured, _, _, joined), alone = table_.join(points)
+    assert (eta, start, measured) == (0.3, "", 16.0)
+    assert float(joined["compressibility"]) == pytest.approx((4 * 2.0 + 12 * 3.0) / 16, rel=1e-15)
+    assert float(joined["compressibility_se"]) == pytest.approx(math.sqrt((4 * 0.3) ** 2 + (12 * 0.1) ** 2) / 16,
+                                                                rel=1e-15)
+    assert float(joined["task_seconds"]) == 40.0
+    assert alone == points[2]
