@@ -1429,6 +1429,12 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert all(point in melting.points for point in longer.points) and len(longer.points) == 4
     assert longer.repeats * longer.measure == 5 * melting.repeats * melting.measure
     assert (longer.equilibrate, longer.observables) == (melting.equilibrate, melting.observables)
+    more = sweeps.read_sweep("scenes/melting_coexistence_more.toml")  # 0.710 again, alike but for the seed
+    assert {k: v for k, v in more.scene.items() if k != "seed"} == {k: v for k, v in longer.scene.items()
+                                                                     if k != "seed"}
+    assert more.scene["seed"] not in (longer.scene["seed"], melting.scene["seed"])
+    assert more.points == [p for p in longer.points if p["area_fraction"] == 0.710] and len(more.points) == 2
+    assert more.identity() == {**longer.identity(), "scene": more.scene}
 
 
 def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_whole_time(tmp_path):
