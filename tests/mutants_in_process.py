@@ -44,9 +44,16 @@ def _done(results_file):
 
 
 def main(names_file, results_file, extra):
+    sys.path.insert(0, os.getcwd())  # mutmut's folder: its mutated package, not the one installed
     names = [line.strip() for line in open(names_file) if line.strip()]
+    if not os.path.isfile("mutmut-stats.json"):
+        sys.exit(f"no mutmut-stats.json in {os.getcwd()}: run this in mutmut's folder (mutants/) after `mutmut run`")
     stats = json.load(open("mutmut-stats.json"))
     by_function, duration = stats["tests_by_mangled_function_name"], stats["duration_by_test"]
+    package = __import__(next(iter(by_function)).split(".")[0])
+    if not os.path.abspath(package.__file__).startswith(os.getcwd() + os.sep):
+        sys.exit(f"{package.__name__} is imported from {package.__file__}, not from mutmut's folder {os.getcwd()}: "
+                 "run this in that folder")
     signal.signal(signal.SIGALRM, _alarm)
     with open(results_file, "a", buffering=1) as out:
         for name in names:
