@@ -14,8 +14,8 @@ NAMES.txt holds a mutant name a line (`mutmut results --all true`); each line of
 is "NAME killed|survived|timeout|error-STATUS SECONDS" (an endless loop is stopped by an alarm
 and fails its test; an error: pytest found no such test, say). A mutant RESULTS.txt holds is
 skipped, so a rerun goes on where it stopped, and two processes sharing one RESULTS.txt (one
-given NAMES.txt in reverse) split the work. EXTRA_TEST:
-tests run for every mutant after its own (tests added since the stats were taken). Tests
+given NAMES.txt in reverse) split the work. EXTRA_TEST: tests run for every mutant before its
+own (tests added since the stats were taken, for the survivors of a run). Tests
 that start processes of their own (a Dask cluster, the command line) do not see the mutant.
 """
 import json
@@ -62,7 +62,7 @@ def main(names_file, results_file, extra):
             function = name.split("__mutmut_")[0]
             tests = sorted(by_function.get(function, []),
                            key=lambda t: (FIRST.get(t.split("::")[0], len(FIRST)), duration.get(t, 0.0)))
-            tests += [t for t in extra if t not in tests]
+            tests = list(extra) + [t for t in tests if t not in extra]
             if not tests:
                 out.write(f"{name} no-tests 0\n")
                 continue
