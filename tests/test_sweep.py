@@ -181,10 +181,12 @@ def test_a_task_outside_a_worker_starts_taichi_on_the_cpu_with_the_threads_asked
         import taichi as ti
         from circles import backend, sweep as sweeps
 
+        asked, start = [], backend.init
+        backend.init = lambda *args, **kwargs: (asked.append(args[:1]), start(*args, **kwargs))[1]
         for threads, want in ((None, os.cpu_count() or 1), (3, 3), (0, 1)):
             backend._state["initialized"] = False
             sweeps._ensure_runtime(threads)
-            assert backend._state["arch"] == "cpu"
+            assert backend._state["arch"] == "cpu" and asked[-1] == ("cpu",)  # the CPU asked for, GPU or not
             assert ti.lang.impl.current_cfg().cpu_max_num_threads == want, (threads, want)
         runtime = backend._state["runtime"]
         sweeps._ensure_runtime(5)
