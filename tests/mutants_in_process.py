@@ -11,8 +11,8 @@ its stats (a run stopped at once will do):
     python tests/mutants_in_process.py NAMES.txt RESULTS.txt [EXTRA_TEST ...]
 
 NAMES.txt holds a mutant name a line (`mutmut results --all true`); each line of RESULTS.txt
-is "NAME killed|survived|timeout|error-STATUS SECONDS" (an endless loop is stopped by an alarm
-and fails its test; an error: pytest found no such test, say). A mutant RESULTS.txt holds is
+is "NAME killed|survived|timeout|error-STATUS SECONDS" (a timeout: an endless loop, or one
+stopped by an alarm; an error: pytest found no such test, say). A mutant RESULTS.txt holds is
 skipped, so a rerun goes on where it stopped, and two processes sharing one RESULTS.txt (one
 given NAMES.txt in reverse) split the work. EXTRA_TEST: tests run for every mutant before its
 own (tests added since the stats were taken, for the survivors of a run). Tests
@@ -34,7 +34,11 @@ class _Timeout(Exception):
     pass
 
 
+_timed_out = []
+
+
 def _alarm(*_):
+    _timed_out.append(True)  # pytest reports the exception as a failing test: the verdict says timeout
     raise _Timeout()
 
 
@@ -68,7 +72,9 @@ def main(names_file, results_file, extra):
                 continue
             os.environ["MUTANT_UNDER_TEST"] = name
             start = time.perf_counter()
-            signal.alarm(int(3 * sum(duration.get(t, 1.0) for t in tests)) + 60)  # an endless loop
+            # An endless loop; generous, for kernels that compile the first time they are used.
+            signal.alarm(int(10 * sum(duration.get(t, 1.0) for t in tests)) + 600)
+            _timed_out.clear()
             try:
                 status = pytest.main(["-x", "-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider",
                                       "-p", "no:warnings", "--no-header", "-o", "addopts=", *tests])
@@ -79,6 +85,8 @@ def main(names_file, results_file, extra):
                 os.environ["MUTANT_UNDER_TEST"] = ""
             if status == pytest.ExitCode.INTERRUPTED:
                 raise KeyboardInterrupt  # Ctrl-C: this mutant is not done
+            if _timed_out:
+                status = "timeout"
             verdict = {pytest.ExitCode.OK: "survived", pytest.ExitCode.TESTS_FAILED: "killed", "timeout": "timeout"}
             # any other status (a test not found, no test collected) is no verdict: say so
             out.write(f"{name} {verdict.get(status, f'error-{status}')} {time.perf_counter() - start:.1f}\n")
