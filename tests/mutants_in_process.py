@@ -73,7 +73,7 @@ def main(names_file, results_file, extra):
             os.environ["MUTANT_UNDER_TEST"] = name
             start = time.perf_counter()
             # An endless loop; generous, for kernels that compile the first time they are used.
-            signal.alarm(int(10 * sum(duration.get(t, 1.0) for t in tests)) + 600)
+            signal.alarm(int(3 * sum(duration.get(t, 1.0) for t in tests)) + 300)
             _timed_out.clear()
             try:
                 status = pytest.main(["-x", "-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider",
