@@ -606,6 +606,22 @@ def test_room_to_place_ends_exactly_at_the_side(precision, eps):
     assert "leaves no room to place the circle" in str(refused_.value)
 
 
+def test_an_area_fraction_runs_from_above_zero_to_the_densest_packing_itself():
+    """pi / sqrt(12), the hexagonal packing, is the largest area fraction a box can be made for;
+    anything above it, zero or less, or no number, is refused in one line naming it."""
+    from circles.scene import check_area_fraction_value
+
+    densest = math.pi / math.sqrt(12.0)
+    assert check_area_fraction_value(densest) == densest and check_area_fraction_value(1e-300) == 1e-300
+    tail = " is out of range: give a fraction > 0 and at most the densest packing 0.9069 (below about 0.7 for a fluid)"
+    for value, message in ((math.nextafter(densest, 1.0), f"area_fraction = {math.nextafter(densest, 1.0)!r}{tail}"),
+                           (0.0, f"area_fraction = 0.0{tail}"), ("x", "area_fraction = 'x' is not a number"),
+                           (math.nan, "area_fraction = nan is not finite: give a finite number")):
+        with pytest.raises(ValueError) as refused_:
+            check_area_fraction_value(value)
+        assert str(refused_.value) == message
+
+
 def test_a_crystal_scene_goes_to_a_dict_and_back():
     from circles.scene import Scene
 
