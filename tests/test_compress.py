@@ -274,6 +274,8 @@ def test_species_give_each_count_its_radius_and_the_box_its_exact_area():
                   area_fraction=0.4)
     assert mixed.species == ((6, 0.5), (5, 0.7))  # round(5.5) = 6 (to even), the rest 5
     assert mixed.area_fraction == pytest.approx(0.4, rel=1e-12)
+    halves = [{"fraction": 0.5, "radius": 0.05}, {"fraction": 0.5, "radius": 0.07}]
+    assert Scene(species=halves, area_fraction=0.3).species == ((5000, 0.05), (5000, 0.07))  # fractions of n's default
     pairs = Scene.from_dict({"species": [[3, 0.5], [1, 0.7]], "box": [10.0, 4.0]})  # [count, radius] pairs
     assert pairs == scene
     three = [{"fraction": 0.2, "radius": 0.5}, {"fraction": 0.3, "radius": 0.6}, {"fraction": 0.5, "radius": 0.7}]

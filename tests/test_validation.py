@@ -541,6 +541,9 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"radius": (0.1, "b")}, "radius = 'b' is not a number"),
     ({"radius": (0.1, 0.05)}, "radius = (0.1, 0.05): max 0.05 is below min 0.1"),
     ({"radius": -0.1}, "radius = -0.1: the smallest value -0.1 is out of range (must be > 0)"),
+    ({"radius": 0.0}, "radius = 0.0: the smallest value 0.0 is out of range (must be > 0)"),
+    ({"n": True}, "n = True must be a whole number of circles"),
+    ({"n": 2.5}, "n = 2.5 must be a whole number of circles"),
     ({"speed": (-1.0, 1.0)}, "speed = (-1.0, 1.0): the smallest value -1.0 is out of range (must be >= 0)"),
     ({"speed": ("x", 1.0)}, "speed = 'x' is not a number"),
 ])
@@ -548,7 +551,7 @@ def test_a_number_or_a_pair_is_refused_word_for_word(fields, message):
     from circles.scene import Scene
 
     with pytest.raises(ValueError) as refused_:
-        Scene(n=10, box=(4.0, 4.0), **fields)
+        Scene(**{"n": 10, "box": (4.0, 4.0), **fields})
     assert str(refused_.value) == message
 
 
