@@ -543,11 +543,19 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"radius": -0.1}, "radius = -0.1: the smallest value -0.1 is out of range (must be > 0)"),
     ({"radius": 0.0}, "radius = 0.0: the smallest value 0.0 is out of range (must be > 0)"),
     ({"n": True}, "n = True must be a whole number of circles"),
+    ({"start": "melted"}, "start 'melted' is unknown: use one of 'fluid', 'crystal', 'compressed'"),
+    ({"mass": "heavy"}, "mass model 'heavy' is unknown: use one of 'radius', 'area', 'equal' (masses of your own go "
+                        "to Simulation.from_arrays)"),
+    ({"boundary": "torus"}, "boundary 'torus' is unknown: use one of 'walls', 'periodic'"),
+    ({"scheme": "x"}, "scheme 'x' is unknown: use one of 'event', 'discrete'"),
+    ({"precision": "f16"}, "precision 'f16' is unknown: use one of 'f32', 'f64'"),
+    ({"species": [{"count": 2, "radius": 1.0}], "radius": 0.3, "box": (20.0, 20.0), "n": 2},
+     "radius = 0.3 and species are both given: the species give the radii; drop radius"),
     ({"n": 2.5}, "n = 2.5 must be a whole number of circles"),
     ({"speed": (-1.0, 1.0)}, "speed = (-1.0, 1.0): the smallest value -1.0 is out of range (must be >= 0)"),
     ({"speed": ("x", 1.0)}, "speed = 'x' is not a number"),
 ])
-def test_a_number_or_a_pair_is_refused_word_for_word(fields, message):
+def test_a_scene_field_is_refused_word_for_word(fields, message):
     from circles.scene import Scene
 
     with pytest.raises(ValueError) as refused_:
