@@ -544,6 +544,13 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"radius": 0.0}, "radius = 0.0: the smallest value 0.0 is out of range (must be > 0)"),
     ({"n": True}, "n = True must be a whole number of circles"),
     ({"start": "melted"}, "start 'melted' is unknown: use one of 'fluid', 'crystal', 'compressed'"),
+    ({"start": "compressed", "precision": "f32"}, "start = 'compressed' needs precision = 'f64': a compression leaves "
+                                                  "pairs at contact, which positions rounded to float32 would overlap; "
+                                                  "give precision = 'f64'"),
+    ({"start": "compressed", "speed": 0.0}, "start = 'compressed' needs moving circles, not speed = 0.0: the disks "
+                                            "grow while they collide; give a speed above 0"),
+    ({"start": "crystal"}, "start = 'crystal' needs the crystal's shape: give crystal = [nx, ny], its columns and rows "
+                           "(n = nx ny, ny even)"),
     ({"mass": "heavy"}, "mass model 'heavy' is unknown: use one of 'radius', 'area', 'equal' (masses of your own go "
                         "to Simulation.from_arrays)"),
     ({"boundary": "torus"}, "boundary 'torus' is unknown: use one of 'walls', 'periodic'"),
