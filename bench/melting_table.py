@@ -58,7 +58,7 @@ def main():
     lines = [f"{cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, a task a core, {args.date}: "
              + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
              + "; ".join(words for _, words in runs) + ". Measured: the simulated time measured per start, all "
-             "repeats together.", "",
+             "repeats together; the rows of one point measured alike in two sweeps are joined into one.", "",
              "| area fraction | start | measured | beta P d^2 | published (Li et al. 2022) | "
              "difference / combined SE | hexatic order | wall s (tasks) |", "|---|---|---|---|---|---|---|---|"]
     longest = {}
