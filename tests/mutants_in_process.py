@@ -58,6 +58,10 @@ def main(names_file, results_file, extra):
     if not os.path.abspath(package.__file__).startswith(os.getcwd() + os.sep):
         sys.exit(f"{package.__name__} is imported from {package.__file__}, not from mutmut's folder {os.getcwd()}: "
                  "run this in that folder")
+    os.environ["MUTANT_UNDER_TEST"] = ""
+    if extra and pytest.main(["-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider", "-o", "addopts=",
+                              *extra]) != pytest.ExitCode.OK:
+        sys.exit("the extra tests fail without a mutant: every mutant would look killed")
     signal.signal(signal.SIGALRM, _alarm)
     with open(results_file, "a", buffering=1) as out:
         for name in names:
