@@ -544,6 +544,11 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"radius": 0.0}, "radius = 0.0: the smallest value 0.0 is out of range (must be > 0)"),
     ({"n": True}, "n = True must be a whole number of circles"),
     ({"start": "melted"}, "start 'melted' is unknown: use one of 'fluid', 'crystal', 'compressed'"),
+    ({"seed": -1}, "seed = -1 must be a whole number >= 0"),
+    ({"n": 100, "box": (1.0, 1.0), "radius": 0.1},
+     "area fraction 3.1416 of 100 circles in a 1.0 x 1.0 box exceeds the densest packing 0.9069: use fewer or smaller "
+     "circles or a bigger box: 2.51 x 2.51 holds them at area fraction 0.5 (box = [2.51, 2.51], or area_fraction = 0.5 "
+     "in place of the box)"),
     ({"start": "compressed", "precision": "f32"}, "start = 'compressed' needs precision = 'f64': a compression leaves "
                                                   "pairs at contact, which positions rounded to float32 would overlap; "
                                                   "give precision = 'f64'"),
@@ -577,6 +582,8 @@ def test_numpy_scalars_are_taken_as_numbers():
 
     scene = Scene(n=np.array(40), radius=np.array(0.05), box=(np.float64(4.0), 4.0), seed=np.int64(3))
     assert scene == Scene(n=40, radius=0.05, box=(4.0, 4.0), seed=3) and type(scene.n) is int
+    scene = Scene(n=np.int64(40), radius=0.05, box=(4.0, 4.0), dt=np.array(0.01))
+    assert (type(scene.n), type(scene.dt), scene.dt) == (int, float, 0.01)
 
 
 def test_the_rounding_margin_is_four_units_in_the_last_place_of_the_longer_side():
