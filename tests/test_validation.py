@@ -575,6 +575,22 @@ def test_a_scene_field_is_refused_word_for_word(fields, message):
     assert str(refused_.value) == message
 
 
+def test_a_scene_dict_s_lists_are_shown_as_the_scene_holds_them():
+    """A scene file's lists ([a, b]) become the tuples a Scene holds before they are checked, so
+    a refusal shows the value as Scene(...) given it would."""
+    from circles.scene import Scene
+
+    for fields, message in (({"radius": [0.1, 0.05]}, "radius = (0.1, 0.05): max 0.05 is below min 0.1"),
+                            ({"speed": [-1.0, 1.0]}, "speed = (-1.0, 1.0): the smallest value -1.0 is out of range "
+                                                     "(must be >= 0)"),
+                            ({"box": [-4.0, 4.0]}, "box = (-4.0, 4.0): both sides must be > 0"),
+                            ({"crystal": [2, 3, 4], "boundary": "periodic"},
+                             "crystal = (2, 3, 4) must be [nx, ny]: the columns and rows of the triangular crystal")):
+        with pytest.raises(ValueError) as refused_:
+            Scene.from_dict({"n": 10, "box": [4.0, 4.0], **fields})
+        assert str(refused_.value) == message
+
+
 def test_numpy_scalars_are_taken_as_numbers():
     import numpy as np
 
@@ -582,8 +598,8 @@ def test_numpy_scalars_are_taken_as_numbers():
 
     scene = Scene(n=np.array(40), radius=np.array(0.05), box=(np.float64(4.0), 4.0), seed=np.int64(3))
     assert scene == Scene(n=40, radius=0.05, box=(4.0, 4.0), seed=3) and type(scene.n) is int
-    scene = Scene(n=np.int64(40), radius=0.05, box=(4.0, 4.0), dt=np.array(0.01))
-    assert (type(scene.n), type(scene.dt), scene.dt) == (int, float, 0.01)
+    scene = Scene(n=np.int64(40), radius=0.05, box=(4.0, 4.0), dt=np.array(0.01), seed=np.int64(5))
+    assert (type(scene.n), type(scene.dt), scene.dt, type(scene.seed)) == (int, float, 0.01, int)
 
 
 def test_the_rounding_margin_is_four_units_in_the_last_place_of_the_longer_side():
@@ -655,6 +671,9 @@ def test_a_crystal_scene_goes_to_a_dict_and_back():
     d = scene.to_dict()
     assert d["crystal"] == [16, 14] and "area_fraction" not in d and "species" not in d
     assert Scene.from_dict(d) == scene
+    listed = Scene(n=224, crystal=[16, 14], radius=0.5, area_fraction=0.7, boundary="periodic", mass="equal",
+                   start="crystal")
+    assert listed == scene and listed.crystal == (16, 14)  # held as a tuple, however given
 
 
 def test_a_side_that_is_no_finite_number_is_left_as_it_is():
