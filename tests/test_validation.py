@@ -674,6 +674,10 @@ def test_a_crystal_scene_goes_to_a_dict_and_back():
     listed = Scene(n=224, crystal=[16, 14], radius=0.5, area_fraction=0.7, boundary="periodic", mass="equal",
                    start="crystal")
     assert listed == scene and listed.crystal == (16, 14)  # held as a tuple, however given
+    with pytest.raises(ValueError) as refused_:  # n given beside the crystal is checked, not replaced
+        Scene.from_dict({**d, "n": 100})
+    assert str(refused_.value) == ("n = 100 but crystal = [16, 14] holds 224 circles: give n = 224 (a scene file or "
+                                   "sweep file may leave n out)")
 
 
 def test_a_side_that_is_no_finite_number_is_left_as_it_is():
