@@ -545,6 +545,8 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"n": True}, "n = True must be a whole number of circles"),
     ({"start": "melted"}, "start 'melted' is unknown: use one of 'fluid', 'crystal', 'compressed'"),
     ({"seed": -1}, "seed = -1 must be a whole number >= 0"),
+    ({"crystal": (16, 1.5), "box": None, "area_fraction": 0.7, "boundary": "periodic"},
+     "crystal[1] = 1.5 must be a whole number >= 0"),
     ({"n": 224, "crystal": (16, 14), "radius": (0.4, 0.5), "box": None, "area_fraction": 0.7, "boundary": "periodic"},
      "crystal = [16, 14] with radii from 0.4 to 0.5: a crystal is of equal circles; give one radius"),
     ({"n": 224, "crystal": (16, 14), "radius": 0.5, "box": None, "area_fraction": 0.7},
