@@ -545,6 +545,9 @@ def test_a_side_is_rounded_up_to_three_significant_digits(x, rounded):
     ({"n": True}, "n = True must be a whole number of circles"),
     ({"start": "melted"}, "start 'melted' is unknown: use one of 'fluid', 'crystal', 'compressed'"),
     ({"seed": -1}, "seed = -1 must be a whole number >= 0"),
+    ({"n": 4, "crystal": (0, 4), "radius": 0.5, "box": None, "area_fraction": 0.05, "boundary": "periodic"},
+     "crystal = [0, 4]: give nx >= 1 columns and an even number ny >= 2 of rows (a periodic box stacks the rows of a "
+     "triangular crystal in pairs)"),
     ({"crystal": (16, 1.5), "box": None, "area_fraction": 0.7, "boundary": "periodic"},
      "crystal[1] = 1.5 must be a whole number >= 0"),
     ({"n": 224, "crystal": (16, 14), "radius": (0.4, 0.5), "box": None, "area_fraction": 0.7, "boundary": "periodic"},
@@ -680,6 +683,8 @@ def test_a_crystal_scene_goes_to_a_dict_and_back():
     listed = Scene(n=224, crystal=[16, 14], radius=0.5, area_fraction=0.7, boundary="periodic", mass="equal",
                    start="crystal")
     assert listed == scene and listed.crystal == (16, 14)  # held as a tuple, however given
+    smallest = Scene(n=2, crystal=(1, 2), radius=0.5, area_fraction=0.05, boundary="periodic", start="crystal")
+    assert smallest.crystal == (1, 2)  # one column of two rows: the least a periodic box stacks
     with pytest.raises(ValueError) as refused_:  # n given beside the crystal is checked, not replaced
         Scene.from_dict({**d, "n": 100})
     assert str(refused_.value) == ("n = 100 but crystal = [16, 14] holds 224 circles: give n = 224 (a scene file or "
