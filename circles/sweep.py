@@ -853,10 +853,9 @@ def main(argv):
     except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler
         results = os.path.join(out, RESULTS)
         try:
-            done = len(read_results(out, sweep))
-        except (SweepError, OSError):
-            done = 0
-        where = f"the points done are in {results}" if done else "no point was done"
+            where = f"the points done are in {results}" if read_results(out, sweep) else "no point was done"
+        except (SweepError, OSError) as unreadable:  # the folder changed under the run
+            where = f"the points done cannot be told: {unreadable}"
         print(f"circles: the sweep failed: {type(error).__name__}: {error}; {where}", file=sys.stderr)
         return EXIT_FAILED
     finally:

@@ -1422,6 +1422,25 @@ def test_a_failed_task_says_what_failed_and_where_the_points_done_are(serial, tm
     assert len(sweeps.load_rows(out, sweeps.read_sweep(write(tmp_path, TINY)))) == fail_at // 2
 
 
+def test_a_failed_sweep_whose_results_cannot_be_read_says_so(serial, tmp_path, capsys, monkeypatch):
+    """A task fails after sweep.json was removed under the run: what was done cannot be told,
+    and the line says why rather than claiming points were done or not."""
+    out = tmp_path / "o"
+    real = sweeps.run_task
+
+    def failing(*args, **kwargs):
+        if (out / "results.csv").read_text().count("\n") > 1:  # a point done
+            (out / "sweep.json").unlink()
+            raise RuntimeError("a task's own error")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweeps, "run_task", failing)
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(out)]) == 1
+    assert capsys.readouterr().err == (f"circles: the sweep failed: RuntimeError: a task's own error; the points done "
+                                       f"cannot be told: {out / 'results.csv'} exists without sweep.json: give another "
+                                       f"--out, or remove {out / 'results.csv'}\n")
+
+
 def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longer():
     melting = sweeps.read_sweep("scenes/melting_sweep.toml")
     longer = sweeps.read_sweep("scenes/melting_coexistence.toml")
