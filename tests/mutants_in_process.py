@@ -28,6 +28,9 @@ import pytest
 
 #: Test files tried first: those of the refusals, which kill most mutants of a scene's checks.
 FIRST = {"tests/test_validation.py": 0, "tests/test_compress.py": 1, "tests/test_file_fuzz.py": 2}
+#: pytest in this process, tests in their given order, none of the project's default options.
+PYTEST = ["-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider", "-p", "no:warnings", "--no-header",
+          "-o", "addopts="]
 
 
 class _Timeout(Exception):
@@ -59,8 +62,7 @@ def main(names_file, results_file, extra):
         sys.exit(f"{package.__name__} is imported from {package.__file__}, not from mutmut's folder {os.getcwd()}: "
                  "run this in that folder")
     os.environ["MUTANT_UNDER_TEST"] = ""
-    if extra and pytest.main(["-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider", "-o", "addopts=",
-                              *extra]) != pytest.ExitCode.OK:
+    if extra and pytest.main([*PYTEST, *extra]) != pytest.ExitCode.OK:
         sys.exit("the extra tests fail without a mutant: every mutant would look killed")
     signal.signal(signal.SIGALRM, _alarm)
     with open(results_file, "a", buffering=1) as out:
@@ -76,12 +78,11 @@ def main(names_file, results_file, extra):
                 continue
             os.environ["MUTANT_UNDER_TEST"] = name
             start = time.perf_counter()
+            _timed_out.clear()
             # An endless loop; generous, for kernels that compile the first time they are used.
             signal.alarm(int(3 * sum(duration.get(t, 1.0) for t in tests)) + 300)
-            _timed_out.clear()
             try:
-                status = pytest.main(["-x", "-q", "-n", "0", "-p", "no:randomly", "-p", "no:cacheprovider",
-                                      "-p", "no:warnings", "--no-header", "-o", "addopts=", *tests])
+                status = pytest.main(["-x", *PYTEST, *tests])
             except _Timeout:
                 status = "timeout"
             finally:
