@@ -190,7 +190,7 @@ def _duration(key, value, least_exclusive):
 
 def sweep_from_dict(data: dict, source="") -> Sweep:
     """Check the contents of a sweep file (see the module's docstring) and return the Sweep."""
-    from .scene import Scene
+    from .scene import Scene, check_area_fraction_value, check_box
 
     unknown = sorted(set(data) - set(TABLES))
     if unknown and sweep_or_scene(data) == "scene" and "scene" not in data:
@@ -227,6 +227,15 @@ def sweep_from_dict(data: dict, source="") -> Sweep:
             raise ValueError(f"[vary] {key} lists {twice!r} twice: give each value once")
     if "box" in vary and "area_fraction" in vary:
         raise ValueError("[vary] box and area_fraction are both varied: vary one of them")
+    # A base box (area fraction) that a varied area fraction (box) replaces is still checked: a
+    # malformed value is a mistake in the file, whether or not a point uses it.
+    try:
+        if "box" in scene and "area_fraction" in vary:
+            check_box(scene["box"])
+        if "area_fraction" in scene and "box" in vary:
+            check_area_fraction_value(scene["area_fraction"])
+    except (ValueError, TypeError) as error:
+        raise ValueError(f"[scene] {error}") from None
     unknown = sorted(set(settings) - set(SWEEP_DEFAULTS) - {"checkpoint_every"})
     if unknown:
         raise ValueError(f"[sweep] unknown key(s) {', '.join(unknown)}: known keys are {', '.join(SWEEP_DEFAULTS)}, "

@@ -329,6 +329,11 @@ FRACTION = "0.1, 0.3, 0.5]"
      "[a, b]"),
     (FRACTION, "0.1, 0.3, 0.1]", "[vary] area_fraction lists 0.1 twice: give each value once"),
     (FRACTION, "0.1]\nbox = [[2.0, 2.0]]", "[vary] box and area_fraction are both varied: vary one of them"),
+    ("n = 40", "n = 40\nbox = []", "[scene] box = [] must be a pair (W, H)"),
+    ("n = 40", "n = 40\nbox = [2.0, -1.0]", "[scene] box = (2.0, -1.0): both sides must be > 0"),
+    ("seed = 3\n\n[vary]\narea_fraction = [" + FRACTION, "seed = 3\narea_fraction = 2.0\n[vary]\nbox = [[2.0, 2.0]]",
+     "[scene] area_fraction = 2.0 is out of range: give a fraction > 0 and at most the densest packing 0.9069 (below "
+     "about 0.7 for a fluid)"),
     ("area_fraction = [" + FRACTION, "", "[vary] is empty: give the fields to vary as lists in a [vary] table, e.g. "
      "area_fraction = [0.1, 0.3]"),
     ("[vary]\n", "[vary]\nseed = [1, 2]\n", "[vary] seed cannot be varied: each repeat has its own seed; set [sweep] "
