@@ -67,6 +67,16 @@ def test_types_one_per_radius():
     assert types == ["A", "B", "C"] and list(typeid) == [1, 0, 1, 2]
 
 
+def test_types_name_up_to_26_radii_and_one_type_beyond():
+    """26 radii are A to Z, each circle's type id as GSD's uint32; a 27th makes one type A."""
+    radius = np.linspace(0.1, 0.35, 26)[::-1]
+    typeid, types = type_names(radius)
+    assert types == [chr(c) for c in range(ord("A"), ord("Z") + 1)]
+    assert typeid.dtype == np.uint32 and list(typeid) == list(range(25, -1, -1))
+    typeid, types = type_names(np.append(radius, 0.4))
+    assert types == ["A"] and typeid.dtype == np.uint32 and not typeid.any()
+
+
 @pytest.mark.parametrize("precision,boundary", [("f64", "periodic"), ("f32", "periodic"), ("f64", "walls")])
 def test_a_frame_restarts_the_run_bit_for_bit(circles_cpu, tmp_path, precision, boundary):
     """The state of a frame, and each circle's share of the stats totals, so that the totals go
