@@ -3,11 +3,10 @@
     python bench/melting_table.py [--sweep SWEEP.toml RESULTS_DIR]... [--date YYYY-MM-DD] [--out FILE.md]
                                   [--plot FILE.png]
 
-Default: scenes/melting_sweep.toml with outputs/melting_sweep, and each of
-scenes/melting_coexistence.toml and scenes/melting_coexistence_more.toml with its folder in
-outputs/ where that has results; rows of one point measured alike in several sweeps are joined
-(`join`). Prints
-a Markdown table: each point's beta P d^2 with its standard error, the simulated time measured
+Default: the committed sweeps (`DEFAULT`: scenes/melting_sweep.toml with outputs/melting_sweep,
+and each of the other melting sweeps with its folder in outputs/ where that has results), each
+with the machine and date it was measured on; `--sweep`: sweeps run here, on `--date`. Rows of
+one point measured alike in several sweeps are joined (`join`). Prints a Markdown table: each point's beta P d^2 with its standard error, the simulated time measured
 per start and the tasks' wall time, the published value at that area fraction
 (`circles.reference`), their difference in combined standard errors, the hexatic order; then
 whether the loop is resolved (the pressure at 0.698 above that at 0.710 by more than 3 combined
@@ -29,34 +28,39 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from circles import sweep as sweeps  # noqa: E402
 
-DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep"),
-           ("scenes/melting_coexistence.toml", "outputs/melting_coexistence"),
-           ("scenes/melting_coexistence_more.toml", "outputs/melting_coexistence_more")]
+#: The committed sweeps: file, results folder, and the machine and date its results were measured on.
+FAST = "AMD EPYC (family 26, model 2, L2 1024K, L3 32768K), 2 CPUs"
+DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep", f"{FAST}, 2026-12-06"),
+           ("scenes/melting_coexistence.toml", "outputs/melting_coexistence", f"{FAST}, 2026-12-07"),
+           ("scenes/melting_coexistence_more.toml", "outputs/melting_coexistence_more", f"{FAST}, 2026-12-07"),
+           ("scenes/melting_0714.toml", "outputs/melting_0714", "AMD EPYC (family 25, model 1, L2 512K, L3 32768K), 2 CPUs, 2026-12-07")]
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sweep", nargs=2, action="append", metavar=("SWEEP.toml", "RESULTS_DIR"),
                         help="a sweep file and its results folder (repeatable)")
-    parser.add_argument("--date", default=time.strftime("%Y-%m-%d"), help="the date the sweeps ran")
+    parser.add_argument("--date", default=time.strftime("%Y-%m-%d"), help="the date the sweeps given ran")
     parser.add_argument("--out")
     parser.add_argument("--plot", help="a PNG of beta P d^2 against the area fraction")
     args = parser.parse_args()
     from bench import cpu_details, cpu_model
 
-    pairs = args.sweep or [(ROOT / s, ROOT / r) for s, r in DEFAULT if (ROOT / r / sweeps.RESULTS).is_file()]
+    here = f"{cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, {args.date}"
+    pairs = ([(path, results, here) for path, results in args.sweep] if args.sweep else
+             [(ROOT / s, ROOT / r, where) for s, r, where in DEFAULT if (ROOT / r / sweeps.RESULTS).is_file()])
     runs, points = [], []
-    for path, results in pairs:
+    for path, results, where in pairs:
         sweep = sweeps.read_sweep(path)
         name = os.path.relpath(path, ROOT)
-        runs.append((name, f"`{name}`: {sweep.repeats} repeats of {sweep.equilibrate:g} time units of equilibration "
-                           f"and {sweep.measure:g} of measurement in {sweep.blocks} blocks per point"))
+        runs.append((name, f"`{name}` ({where}): {sweep.repeats} repeats of {sweep.equilibrate:g} time units of "
+                           f"equilibration and {sweep.measure:g} of measurement in {sweep.blocks} "
+                           f"block{'s' if sweep.blocks > 1 else ''} per point"))
         for values, row in sweeps.load_rows(results, sweep):
             points.append((float(values["area_fraction"]), values.get("start", ""), sweep.repeats * sweep.measure,
                            sweep, values, row))
     points = join(points)
-    lines = [f"{cpu_model()}{cpu_details()}, {os.cpu_count()} CPUs, a task a core, {args.date}: "
-             + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
+    lines = ["A task a core: " + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
              + "; ".join(words for _, words in runs) + ". Measured: the simulated time measured per start, all "
              "repeats together; the rows of one point measured alike in two sweeps are joined into one.", "",
              "| area fraction | start | measured | beta P d^2 | published (Li et al. 2022) | "

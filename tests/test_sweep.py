@@ -1461,6 +1461,12 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert more.scene["seed"] not in (longer.scene["seed"], melting.scene["seed"])
     assert more.points == [p for p in longer.points if p["area_fraction"] == 0.710] and len(more.points) == 2
     assert more.identity() == {**longer.identity(), "scene": more.scene}
+    at_0714 = sweeps.read_sweep("scenes/melting_0714.toml")  # a melting sweep point, each repeat one block
+    assert {k: v for k, v in at_0714.scene.items() if k != "seed"} == {k: v for k, v in melting.scene.items()
+                                                                        if k != "seed"}
+    assert at_0714.scene["seed"] not in (more.scene["seed"], longer.scene["seed"], melting.scene["seed"])
+    assert at_0714.points == [p for p in melting.points if p["area_fraction"] == 0.714] and len(at_0714.points) == 2
+    assert (at_0714.blocks, at_0714.equilibrate, at_0714.observables) == (1, melting.equilibrate, melting.observables)
 
 
 def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_whole_time(tmp_path):
