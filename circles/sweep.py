@@ -26,7 +26,8 @@ point's value is the mean over all blocks of all its repeats, with its standard 
 spread of those block values over the square root of their count).
 
 `run_sweep` streams a row per point into ``DIR/results.csv`` as the point's last task ends,
-skips the points the file holds already, and draws a plot per observable (`plot_sweep`).
+skips the points the file holds already, keeps each finished task of a point not yet done in
+``DIR/tasks/`` for a rerun to take, and draws a plot per observable (`plot_sweep`).
 Tasks are independent and their results are put together in repeat order, so the numbers
 are the same whatever the number of workers or the order in which tasks finish.
 """
@@ -72,6 +73,8 @@ RESULTS = "results.csv"
 IDENTITY = "sweep.json"
 #: The folder of the tasks' checkpoints, in the output folder, with [sweep] checkpoint_every.
 CHECKPOINTS = "checkpoints"
+#: The folder of the results of finished tasks whose point has no row yet, in the output folder.
+TASKS = "tasks"
 
 
 class SweepError(ValueError):
@@ -527,24 +530,71 @@ class _ResultsFile:
 
 # ---- running ------------------------------------------------------------------------------
 
+def task_path(out, sweep, point, repeat):
+    """Where the result of task (point, repeat) waits for its point's other tasks: named by a
+    hash of the task's scene (its values and seed), so that values added to [vary], which
+    renumber the points, do not give a result to another task."""
+    scene = json.dumps(sweep.point_scene(point, repeat), sort_keys=True)
+    name = hashlib.sha256(scene.encode()).hexdigest()[:24]
+    return os.path.join(out, TASKS, f"{name}.json")
+
+
+def _task_record(sweep, point, repeat):
+    return {"fingerprint": _fingerprint(sweep), "scene": json.loads(json.dumps(sweep.point_scene(point, repeat))),
+            "point": sweep.points[point], "repeat": repeat}
+
+
+def keep_task(out, sweep, point, repeat, result):
+    """Write a finished task's result to `task_path`, whole (renamed into place once on disk)."""
+    from .storage import replaced_whole
+
+    path = task_path(out, sweep, point, repeat)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with replaced_whole(path) as part:
+        with open(part, "w") as file:
+            json.dump({**_task_record(sweep, point, repeat), "result": result}, file)
+            file.flush()
+            os.fsync(file.fileno())
+    return path
+
+
+def kept_task(out, sweep, point, repeat):
+    """The result `keep_task` kept of task (point, repeat), or None: no file, a file cut short or
+    not JSON, or one of another sweep or task."""
+    path = task_path(out, sweep, point, repeat)
+    try:
+        with open(path) as file:
+            held = json.load(file)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(held, dict) or {k: held.get(k) for k in ("fingerprint", "scene", "point", "repeat")} \
+            != _task_record(sweep, point, repeat) or not isinstance(held.get("result"), dict):
+        return None
+    return held["result"]
+
+
 @dataclass
 class SweepRun:
     """What a run of a sweep did: the points run and skipped (indices), the rows written, the
-    tasks' results by (point, repeat), and the wall time."""
+    tasks' results by (point, repeat), the wall time, and the tasks whose result an earlier
+    run had kept (not run again)."""
 
     ran: list
     skipped: list
     rows: list
     results: dict
     wall_s: float
+    kept: list = field(default_factory=list)
 
 
 def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None):
     """Run the points of `sweep` that DIR/results.csv does not hold yet, a task per (point,
     repeat): on the Dask `client` (each task's key ends in -POINT-REPEAT) (distributed.Client) when given, else one by one in this
-    process. A row is appended to DIR/results.csv when a point's last task ends; `on_row(row)`
-    and `on_result((point, repeat), result)` are called as they come. `threads`: Taichi's
-    threads in each worker process (None: the worker's own thread count)."""
+    process. A row is appended to DIR/results.csv when a point's last task ends; until then each
+    finished task's result is kept in DIR/tasks/ (`keep_task`), so that a run stopped mid-point
+    does not run it again. `on_row(row)` and `on_result((point, repeat), result)` are called as
+    they come (first for the results kept). `threads`: Taichi's threads in each worker process
+    (None: the worker's own thread count)."""
     started = time.perf_counter()
     done = read_results(out, sweep)
     todo = [i for i, values in enumerate(sweep.points) if _point_key(values.values()) not in done]
@@ -554,18 +604,27 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
     results, rows = {}, []
     left = {p: sweep.repeats for p in todo}
 
-    def finished(task, result):
+    def finished(task, result, kept=False):
         results[task] = result
-        if on_result is not None:
-            on_result(task, result)
         point = task[0]
         left[point] -= 1
+        if not kept and left[point] > 0:
+            keep_task(out, sweep, *task, result)
+        if on_result is not None:
+            on_result(task, result)
         if left[point] == 0:
             row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
             file.write(row)
             rows.append(row)
+            for r in range(sweep.repeats):  # results.csv holds them now
+                try:
+                    os.unlink(task_path(out, sweep, point, r))
+                except FileNotFoundError:
+                    pass
             if on_row is not None:
                 on_row(row)
+
+    kept = {task: result for task in tasks if (result := kept_task(out, sweep, *task)) is not None}
 
     checkpoints = os.path.join(out, CHECKPOINTS) if sweep.checkpoint_every is not None else None
     if checkpoints is not None:
@@ -577,6 +636,9 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
                 where, sweep.checkpoint_every)
 
     try:
+        for task, result in kept.items():
+            finished(task, result, kept=True)
+        tasks = [task for task in tasks if task not in kept]
         if client is None:
             for task in tasks:
                 finished(task, run_task(*args(task)))
@@ -597,7 +659,11 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         file.close()
     if checkpoints is not None and not any(p.endswith(".gsd") for p in os.listdir(checkpoints)):
         shutil.rmtree(checkpoints, ignore_errors=True)  # every task ended: what is left are temporary names
-    return SweepRun(ran=todo, skipped=skipped, rows=rows, results=results, wall_s=time.perf_counter() - started)
+    held = os.path.join(out, TASKS)
+    if os.path.isdir(held) and not any(p.endswith(".json") for p in os.listdir(held)):
+        shutil.rmtree(held, ignore_errors=True)  # every point has its row
+    return SweepRun(ran=todo, skipped=skipped, rows=rows, results=results, wall_s=time.perf_counter() - started,
+                    kept=list(kept))
 
 
 def local_cluster(workers, threads_per_worker=1):
@@ -838,8 +904,8 @@ def main(argv):
         run = run_sweep(sweep, out, client=client, threads=threads, on_row=on_row)
         resumed = sum(1 for result in run.results.values() if result.get("resumed_at", 0.0) > 0)
         print(f"done        {len(run.ran)} points run, {len(run.skipped)} already in {os.path.join(out, RESULTS)}, "
-              f"{run.wall_s:.1f} s" + (f"; tasks that went on from a checkpoint: {resumed}" if resumed else ""),
-              flush=True)
+              f"{run.wall_s:.1f} s" + (f"; tasks that went on from a checkpoint: {resumed}" if resumed else "")
+              + (f"; tasks done by an earlier run: {len(run.kept)}" if run.kept else ""), flush=True)
         try:
             paths = plot_sweep(sweep, out)
             print(f"plots       {', '.join(paths)}")
@@ -856,7 +922,8 @@ def main(argv):
                   f"({worst[4]:+.1f} standard errors) at area fraction {worst[0]:g}")
         return 0
     except KeyboardInterrupt:
-        print("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun runs the others",
+        print("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun runs the others "
+              "(the tasks done of those are kept)",
               file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as error:  # a task's error, a worker lost too often (KilledWorker), a lost scheduler

@@ -572,6 +572,86 @@ def test_a_rerun_runs_exactly_the_points_results_csv_lacks(serial, tmp_path):
     assert b"\r" not in (out / "results.csv").read_bytes()  # lines end in \n alone, on every system
 
 
+def same(a, b):
+    """Equal results, NaN (the wall pressure of a periodic box) equal to NaN."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def stop_after(count):
+    """An on_result that stops the run (as Ctrl-C does) when `count` tasks have ended, and the
+    results it saw."""
+    seen = {}
+
+    def on_result(task, result):
+        seen[task] = result
+        if len(seen) == count:
+            raise KeyboardInterrupt
+
+    return on_result, seen
+
+
+def test_a_sweep_stopped_mid_point_keeps_its_finished_tasks_and_the_rerun_takes_them(serial, tmp_path):
+    """Stopped after three tasks: point 0 has its row, and the result of point 1's first repeat
+    waits in DIR/tasks/ under its own name. The rerun takes it (the same result, seconds and
+    all: not run again), runs the three others, gives the serial table, and leaves no tasks/."""
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    on_result, seen = stop_after(3)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(sweep, out, on_result=on_result)
+    assert list(table(out)) == ["0.1"]
+    assert os.listdir(out / sweeps.TASKS) == [os.path.basename(sweeps.task_path(out, sweep, 1, 0))]
+    assert same(sweeps.kept_task(out, sweep, 1, 0), seen[1, 0])
+    ran = []
+    run = sweeps.run_sweep(sweep, out, on_result=lambda task, result: ran.append(task))
+    assert run.kept == [(1, 0)] and same(run.results[1, 0], seen[1, 0])
+    assert ran == [(1, 0), (1, 1), (2, 0), (2, 1)] and run.ran == [1, 2]
+    assert table(out) == table(serial_out)
+    assert not (out / sweeps.TASKS).exists()
+
+
+def test_a_kept_task_is_taken_only_by_its_own_task_of_its_own_sweep(serial, tmp_path):
+    """A task file cut short, of another task, or of another sweep is not taken: that task runs
+    again. The file is named by the task's scene, not its point's number: with a value added
+    before it in [vary], the point (now the third) still finds its own result."""
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    on_result, seen = stop_after(3)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(sweep, out, on_result=on_result)
+    path = sweeps.task_path(out, sweep, 1, 0)
+    whole = open(path).read()
+    wider = sweeps.read_sweep(write(tmp_path, TINY.replace("[0.1, 0.3, 0.5]", "[0.05, 0.1, 0.3, 0.5]"), "wider.toml"))
+    assert sweeps.task_path(out, wider, 2, 0) == path and same(sweeps.kept_task(out, wider, 2, 0), seen[1, 0])
+    assert sweeps.task_path(out, sweep, 1, 1) != path
+    for broken in (whole[:-1], whole.replace('"repeat": 0', '"repeat": 1'), "[]",
+                   whole.replace(sweeps._fingerprint(sweep), "0" * 64)):
+        with open(path, "w") as file:
+            file.write(broken)
+        assert sweeps.kept_task(out, sweep, 1, 0) is None, broken[-80:]
+    run = sweeps.run_sweep(sweep, out)
+    assert run.kept == [] and len(run.results) == 4
+    assert table(out) == table(serial_out)
+
+
+@pytest.mark.cluster
+def test_a_sweep_stopped_on_a_cluster_runs_again_only_the_tasks_not_done(serial, cluster, tmp_path):
+    """On the local cluster: stopped after three tasks ended, the rerun takes the result waiting
+    (its own seconds and process: not run again), runs the others, and gives the serial table."""
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    on_result, seen = stop_after(3)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(sweep, out, client=cluster, threads=1, on_result=on_result)
+    with_row = {p for p in range(3) if all((p, r) in seen for r in range(2))}
+    waiting = sorted(task for task in seen if task[0] not in with_row)
+    assert len(with_row) == 1 and len(waiting) == 1
+    run = sweeps.run_sweep(sweep, out, client=cluster, threads=1)
+    assert run.kept == waiting and same(run.results[waiting[0]], seen[waiting[0]])
+    assert len(run.results) == 4
+    assert table(out) == table(serial_out)
+
+
 def test_a_rerun_over_an_empty_results_csv_writes_its_header_and_every_point(serial, tmp_path):
     """results.csv of no bytes beside the sweep's sweep.json (a stop as the file was made): the
     rerun writes the header once and runs every point, and the table ends as the serial one."""
@@ -785,7 +865,7 @@ def test_theory_gives_liu_and_enskog_for_equal_disks_in_a_periodic_box():
     from circles.theory import enskog_rate, liu_z
 
     sweep = sweeps.sweep_from_dict(tomllib_loads(TINY))
-    n, r, eta, kT = 40, 0.05, 0.3, 0.7
+    r, eta, kT = 0.05, 0.3, 0.7
     rho = eta / (math.pi * r * r)  # n circles of area pi r^2 fill eta of the box
     found = sweeps.theory(sweep, {"area_fraction": eta}, {"temperature": str(kT)})
     assert found["compressibility"] == pytest.approx(liu_z(eta), rel=1e-12)  # the box's area fraction, to round-off
@@ -883,6 +963,31 @@ def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, 
     assert re.fullmatch(r"done        1 points run, 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
                         r"checkpoint: 1", done[0])
     assert not (out / sweeps.CHECKPOINTS).exists()
+
+
+def test_the_command_says_how_many_tasks_an_earlier_run_did(serial, tmp_path, capsys, monkeypatch):
+    """Stopped by Ctrl-C as its fourth task starts, the command has kept the third task's result;
+    its rerun takes it and says so."""
+    import re
+
+    real, calls = sweeps.run_task, []
+
+    def stopped_at_the_fourth(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    path, out = write(tmp_path, TINY), tmp_path / "out"
+    monkeypatch.setattr(sweeps, "run_task", stopped_at_the_fourth)
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 130
+    assert len(os.listdir(out / sweeps.TASKS)) == 1
+    capsys.readouterr()
+    assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
+    done = [line for line in capsys.readouterr().out.splitlines() if line.startswith("done")]
+    assert re.fullmatch(r"done        2 points run, 1 already in .*results.csv, \d+\.\d s; tasks done by an earlier "
+                        r"run: 1", done[0])
+    assert len(calls) == 4 + 3 and table(out) == table(serial[1])
 
 
 def test_a_run_keeps_a_checkpoint_none_of_its_tasks_took_and_times_itself_and_its_tasks(circles_cpu, tmp_path):
@@ -1402,8 +1507,10 @@ def test_the_command_stopped_by_ctrl_c_says_a_rerun_goes_on(serial, tmp_path, ca
 
     monkeypatch.setattr(sweeps, "run_sweep", stopped)
     assert sweeps.main(["sweep", str(write(tmp_path, TINY)), "--workers", "0", "--out", str(tmp_path / "o")]) == 130
-    assert capsys.readouterr().err == ("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun "
-                                       "runs the others\n")
+    err = capsys.readouterr().err  # after the line that kernels compile, where this process has not built them
+    assert err.splitlines()[-1] == ("circles: stopped by Ctrl-C; the points done are in results.csv, and a rerun "
+                                    "runs the others (the tasks done of those are kept)")
+    assert err.endswith("\n") and err.count("circles:") == 1
 
 
 @pytest.mark.parametrize("fail_at, where", [(0, "no point was done"), (2, "the points done are in OUT")])
