@@ -1576,6 +1576,23 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert (at_0714.blocks, at_0714.equilibrate, at_0714.observables) == (1, melting.equilibrate, melting.observables)
 
 
+def test_the_large_melting_sweep_is_engel_s_square_box_compared_with_engel_s_molecular_dynamics():
+    """scenes/melting_65536.toml: 256^2 equal disks in a square periodic box, whose published
+    pressure at 0.698 is Engel et al.'s event-driven MD (first of the two methods at that N),
+    measured from the compressed fluid with checkpoints."""
+    from circles.reference import pressures
+    from circles.scene import Scene
+
+    large = sweeps.read_sweep("scenes/melting_65536.toml")
+    scene = Scene.from_dict(large.point_scene(0, 0))
+    assert scene.n == 256 ** 2 and scene.box[0] == scene.box[1] and scene.start == "compressed"
+    assert math.isclose(scene.n * math.pi * 0.25 / (scene.box[0] * scene.box[1]), 0.698, rel_tol=1e-12)
+    (edmd,) = [p for p in pressures("Engel2013", "EDMD", 65536) if p.eta == 0.698]
+    known = sweeps.theory(large, large.points[0], {"temperature": "0.5"})
+    assert (known["reduced_pressure"], known["reduced_pressure_se"]) == (edmd.beta_p_d2, edmd.se) == (9.17059, 0.00018)
+    assert large.checkpoint_every is not None and "reduced_pressure" in large.observables
+
+
 def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_whole_time(tmp_path):
     """bench/melting_table.py: two sweeps of one point measured alike (seeds apart) give one row:
     the mean over all their blocks (each row weighted by its time measured) and its standard
