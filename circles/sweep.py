@@ -624,7 +624,16 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
             if on_row is not None:
                 on_row(row)
 
-    kept = {task: result for task in tasks if (result := kept_task(out, sweep, *task)) is not None}
+    held = os.path.join(out, TASKS)
+    kept = {}
+    if os.path.isdir(held):
+        kept = {task: result for task in tasks if (result := kept_task(out, sweep, *task)) is not None}
+        for point in skipped:  # a stop between a row and the removal of its tasks' files
+            for r in range(sweep.repeats):
+                try:
+                    os.unlink(task_path(out, sweep, point, r))
+                except FileNotFoundError:
+                    pass
 
     checkpoints = os.path.join(out, CHECKPOINTS) if sweep.checkpoint_every is not None else None
     if checkpoints is not None:
@@ -659,7 +668,6 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         file.close()
     if checkpoints is not None and not any(p.endswith(".gsd") for p in os.listdir(checkpoints)):
         shutil.rmtree(checkpoints, ignore_errors=True)  # every task ended: what is left are temporary names
-    held = os.path.join(out, TASKS)
     if os.path.isdir(held) and not any(p.endswith(".json") for p in os.listdir(held)):
         shutil.rmtree(held, ignore_errors=True)  # every point has its row
     return SweepRun(ran=todo, skipped=skipped, rows=rows, results=results, wall_s=time.perf_counter() - started,

@@ -608,6 +608,10 @@ def test_a_sweep_stopped_mid_point_keeps_its_finished_tasks_and_the_rerun_takes_
     assert ran == [(1, 0), (1, 1), (2, 0), (2, 1)] and run.ran == [1, 2]
     assert table(out) == table(serial_out)
     assert not (out / sweeps.TASKS).exists()
+    # A stop between a point's row and the removal of its tasks' files: the next run removes them.
+    sweeps.keep_task(out, sweep, 2, 1, run.results[2, 1])
+    again = sweeps.run_sweep(sweep, out)
+    assert again.ran == [] and again.kept == [] and not (out / sweeps.TASKS).exists()
 
 
 def test_a_kept_task_is_taken_only_by_its_own_task_of_its_own_sweep(serial, tmp_path):
