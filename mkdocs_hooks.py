@@ -6,7 +6,8 @@ from mkdocs.structure.files import File
 
 #: The committed pictures the pages show, relative to the repository's root.
 PICTURES = ("outputs/circles.gif", "outputs/hexatic.gif", "outputs/eos_sweep.png",
-            "outputs/melting_sweep.png", "outputs/bench/intel-xeon-processor/work_precision.png",
+            "outputs/melting_sweep.png", "outputs/melting_65536/reduced_pressure.png",
+            "outputs/bench/intel-xeon-processor/work_precision.png",
             "outputs/bench/amd-epyc/dense.png")
 
 

@@ -800,16 +800,18 @@ def sweep_figure(sweep, rows, name):
 
 
 def _plot_published(ax, sweep, values):
-    """The published reduced pressures of the sweep's N and box shape (`circles.reference`)."""
+    """The published reduced pressures of the sweep's N and box shape (`circles.reference`): a
+    line per source and method (solid, dashed, dotted), each by area fraction."""
     from .reference import series
     from .scene import Scene
 
     scene = Scene.from_dict(scene_fields(sweep.scene, values, 0))
-    for (source, method), points in itertools.groupby(series(scene.n, scene.box[0] / scene.box[1]),
-                                                      key=lambda p: (p.source, p.method)):
+    found = sorted(series(scene.n, scene.box[0] / scene.box[1]), key=lambda p: (p.source, p.method, p.eta))
+    groups = itertools.groupby(found, key=lambda p: (p.source, p.method))
+    for ((source, method), points), style in zip(groups, itertools.cycle(("-", "--", ":"))):
         points = list(points)
         ax.errorbar([p.eta for p in points], [p.beta_p_d2 for p in points], yerr=[p.se for p in points],
-                    color="0.3", lw=1, label=f"{source} ({method}), N = {scene.n}")
+                    color="0.3", lw=1, ls=style, label=f"{source} ({method}), N = {scene.n}")
 
 
 def _number_of(value):

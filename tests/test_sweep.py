@@ -931,6 +931,16 @@ def test_the_published_series_is_drawn_with_its_source(tmp_path):
     bars = ax.containers[0].lines[2][0].get_segments()
     assert [seg[1][1] - seg[0][1] for seg in bars] == pytest.approx([2 * p.se for p in li], rel=1e-12)
     plt.close(fig)
+    # Two methods at one N (Engel et al.'s 256^2): a line each, by area fraction, told apart by style.
+    fig, ax = plt.subplots()
+    sweeps._plot_published(ax, sweeps.read_sweep("scenes/melting_65536.toml"), {"area_fraction": 0.698})
+    edmd, mpmc = (reference.pressures("Engel2013", method, 65536) for method in ("EDMD", "MPMC"))
+    assert ax.get_legend_handles_labels()[1] == ["Engel2013 (EDMD), N = 65536", "Engel2013 (MPMC), N = 65536"]
+    for line, points, style in zip(ax.get_lines(), (edmd, mpmc), ("-", "--")):
+        assert list(line.get_xdata()) == sorted(p.eta for p in points) and len(points) == 12
+        assert list(line.get_ydata()) == [p.beta_p_d2 for p in sorted(points, key=lambda p: p.eta)]
+        assert line.get_linestyle() == style
+    plt.close(fig)
 
 
 def tomllib_loads(text):
