@@ -605,14 +605,16 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
     left = {p: sweep.repeats for p in todo}
 
     def finished(task, result, kept=False):
+        """Keep the result (a task file, or the point's row when it is the last), then call back:
+        a stop raised by a callback loses nothing that had ended."""
         results[task] = result
         point = task[0]
         left[point] -= 1
-        if not kept and left[point] > 0:
-            keep_task(out, sweep, *task, result)
-        if on_result is not None:
-            on_result(task, result)
-        if left[point] == 0:
+        row = None
+        if left[point] > 0:
+            if not kept:
+                keep_task(out, sweep, *task, result)
+        else:
             row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
             file.write(row)
             rows.append(row)
@@ -621,8 +623,10 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
                     os.unlink(task_path(out, sweep, point, r))
                 except FileNotFoundError:
                     pass
-            if on_row is not None:
-                on_row(row)
+        if on_result is not None:
+            on_result(task, result)
+        if row is not None and on_row is not None:
+            on_row(row)
 
     held = os.path.join(out, TASKS)
     kept = {}

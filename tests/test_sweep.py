@@ -602,6 +602,11 @@ def test_a_sweep_stopped_mid_point_keeps_its_finished_tasks_and_the_rerun_takes_
     assert list(table(out)) == ["0.1"]
     assert os.listdir(out / sweeps.TASKS) == [os.path.basename(sweeps.task_path(out, sweep, 1, 0))]
     assert same(sweeps.kept_task(out, sweep, 1, 0), seen[1, 0])
+    # A stop raised as the result that ends a point comes: its row was written before.
+    on_result, _ = stop_after(2)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(sweep, tmp_path / "two", on_result=on_result)
+    assert list(table(tmp_path / "two")) == ["0.1"] and os.listdir(tmp_path / "two" / sweeps.TASKS) == []
     ran = []
     run = sweeps.run_sweep(sweep, out, on_result=lambda task, result: ran.append(task))
     assert run.kept == [(1, 0)] and same(run.results[1, 0], seen[1, 0])
