@@ -52,3 +52,20 @@ def test_documented_commands_run(page, tmp_path):
         args = docs_blocks.short_command(words)[1:]
         done = run_cli(args, where, timeout=600)
         assert done.returncode == 0, f"{page}: {' '.join(words)}\n{done.stderr[-3000:]}"
+
+
+def test_every_picture_the_pages_show_is_committed():
+    """Each `outputs/` picture the docs pages link to, and that the site's hook publishes, is
+    tracked by git, not just present here (an ignored one breaks the strict build of a clone)."""
+    root = docs_blocks.ROOT
+    if not (root / ".git").exists() or shutil.which("git") is None:
+        pytest.skip("not a git checkout: nothing to ask git")
+    sys.path.insert(0, str(root))
+    from mkdocs_hooks import PICTURES
+
+    linked = {m for page in (root / "docs").glob("*.md")
+              for m in re.findall(r"\]\((outputs/[^)\s]+\.(?:png|gif))\)", page.read_text())}
+    assert linked <= set(PICTURES), sorted(linked - set(PICTURES))
+    for path in PICTURES:
+        done = subprocess.run(["git", "ls-files", "--error-unmatch", path], cwd=root, capture_output=True)
+        assert done.returncode == 0, f"{path} is not committed (an ignored path? see .gitignore)"
