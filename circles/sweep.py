@@ -44,6 +44,7 @@ import sys
 import threading
 import time
 import uuid
+from pathlib import Path
 from dataclasses import dataclass, field, fields
 from numbers import Integral, Real
 
@@ -573,6 +574,12 @@ def kept_task(out, sweep, point, repeat):
     return held["result"]
 
 
+def drop_tasks(out, sweep, point):
+    """Remove the kept results of a point's tasks (its row holds them)."""
+    for repeat in range(sweep.repeats):
+        Path(task_path(out, sweep, point, repeat)).unlink(missing_ok=True)
+
+
 @dataclass
 class SweepRun:
     """What a run of a sweep did: the points run and skipped (indices), the rows written, the
@@ -618,11 +625,7 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
             row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
             file.write(row)
             rows.append(row)
-            for r in range(sweep.repeats):  # results.csv holds them now
-                try:
-                    os.unlink(task_path(out, sweep, point, r))
-                except FileNotFoundError:
-                    pass
+            drop_tasks(out, sweep, point)  # results.csv holds them now
         if on_result is not None:
             on_result(task, result)
         if row is not None and on_row is not None:
@@ -633,11 +636,7 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
     if os.path.isdir(held):
         kept = {task: result for task in tasks if (result := kept_task(out, sweep, *task)) is not None}
         for point in skipped:  # a stop between a row and the removal of its tasks' files
-            for r in range(sweep.repeats):
-                try:
-                    os.unlink(task_path(out, sweep, point, r))
-                except FileNotFoundError:
-                    pass
+            drop_tasks(out, sweep, point)
 
     checkpoints = os.path.join(out, CHECKPOINTS) if sweep.checkpoint_every is not None else None
     if checkpoints is not None:
