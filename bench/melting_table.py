@@ -35,7 +35,8 @@ SLOW = "AMD EPYC (family 25, model 1, L2 512K, L3 32768K), 2 CPUs"
 DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep", f"{FAST}, 2026-12-06"),
            ("scenes/melting_coexistence.toml", "outputs/melting_coexistence", f"{FAST}, 2026-12-07"),
            ("scenes/melting_coexistence_more.toml", "outputs/melting_coexistence_more", f"{FAST}, 2026-12-07"),
-           ("scenes/melting_0714.toml", "outputs/melting_0714", f"{SLOW}, 2026-12-07")]
+           ("scenes/melting_0714.toml", "outputs/melting_0714", f"{SLOW}, 2026-12-07"),
+           ("scenes/melting_0718.toml", "outputs/melting_0718", f"{SLOW}, 2026-12-07")]
 
 
 def main():
@@ -151,7 +152,9 @@ def plot(points, longest, path):
         ax.set_ylabel("reduced pressure beta P d^2")
     axes[0].set_xlim(min(p[0] for p in points) - 0.003, max(p[0] for p in points) + 0.003)
     axes[1].set_xlim(0.6925, max(p[0] for p in points) + 0.002)
-    axes[1].set_ylim(8.9, 9.17)
+    near = [(float(row["reduced_pressure"]), float(row["reduced_pressure_se"])) for eta, *_, row in points
+            if eta > 0.6925]  # the loop's panel holds every point it shows, error bars and all
+    axes[1].set_ylim(min(8.9, min(p - e for p, e in near) - 0.01), max(9.17, max(p + e for p, e in near) + 0.01))
     axes[1].set_title("the loop", fontsize=10)
     axes[0].legend(fontsize=8)
     fig.tight_layout()

@@ -1593,6 +1593,11 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert at_0714.scene["seed"] not in (more.scene["seed"], longer.scene["seed"], melting.scene["seed"])
     assert at_0714.points == [p for p in melting.points if p["area_fraction"] == 0.714] and len(at_0714.points) == 2
     assert (at_0714.blocks, at_0714.equilibrate, at_0714.observables) == (1, melting.equilibrate, melting.observables)
+    at_0718 = sweeps.read_sweep("scenes/melting_0718.toml")  # the same at 0.718, with a seed of its own
+    assert at_0718.scene["seed"] not in (at_0714.scene["seed"], more.scene["seed"], longer.scene["seed"],
+                                         melting.scene["seed"])
+    assert at_0718.points == [p for p in melting.points if p["area_fraction"] == 0.718] and len(at_0718.points) == 2
+    assert at_0718.identity() == {**at_0714.identity(), "scene": at_0718.scene, "repeats": 8}
 
 
 def test_the_large_melting_sweep_is_engel_s_square_box_compared_with_engel_s_molecular_dynamics():
