@@ -622,7 +622,9 @@ def test_a_sweep_stopped_mid_point_keeps_its_finished_tasks_and_the_rerun_takes_
 def test_a_kept_task_is_taken_only_by_its_own_task_of_its_own_sweep(serial, tmp_path):
     """A task file cut short, of another task, or of another sweep is not taken: that task runs
     again. The file is named by the task's scene, not its point's number: with a value added
-    before it in [vary], the point (now the third) still finds its own result."""
+    before it in [vary], the point (now the third) still finds its own result, and the same
+    sweep file with its [scene] written in another order names it alike. The file holds the
+    task's scene, so that a person can tell which task it is."""
     sweep, serial_out = serial
     out = tmp_path / "out"
     on_result, seen = stop_after(3)
@@ -630,6 +632,11 @@ def test_a_kept_task_is_taken_only_by_its_own_task_of_its_own_sweep(serial, tmp_
         sweeps.run_sweep(sweep, out, on_result=on_result)
     path = sweeps.task_path(out, sweep, 1, 0)
     whole = open(path).read()
+    assert json.loads(whole)["scene"] == {**sweep.scene, "area_fraction": 0.3, "seed": sweep.point_scene(1, 0)["seed"]}
+    reordered = sweeps.read_sweep(write(tmp_path, TINY.replace("n = 40\n", "").replace("seed = 3\n", "seed = 3\nn = 40\n"),
+                                        "reordered.toml"))
+    assert list(reordered.scene) != list(sweep.scene) and reordered.identity() == sweep.identity()
+    assert sweeps.task_path(out, reordered, 1, 0) == path
     wider = sweeps.read_sweep(write(tmp_path, TINY.replace("[0.1, 0.3, 0.5]", "[0.05, 0.1, 0.3, 0.5]"), "wider.toml"))
     assert sweeps.task_path(out, wider, 2, 0) == path and same(sweeps.kept_task(out, wider, 2, 0), seen[1, 0])
     assert sweeps.task_path(out, sweep, 1, 1) != path
