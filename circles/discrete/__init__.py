@@ -36,8 +36,9 @@ pick and resolve, the walls and the kernels of a step (`rounds`), the step's sta
 of a CPU's threads (`team_step`), and the host side of a step (`stepper`).
 """
 from ..geometry import wide_row
-from .contacts import LIST0, LIST1, MOST_CONTACTS, NLARGE, PART_PICKS, R_CUT, R_MAX, ROUND, WALLED, per_circle
-from .rounds import _first_round_in_parts, begin_step, list_large, more_rounds, serial_steps, walls
+from .contacts import MOST_CONTACTS, NLARGE, PART_PICKS, per_circle
+# _first_round_in_parts: private, reached here by the tests.
+from .rounds import _first_round_in_parts, begin_step, list_large, more_rounds, serial_steps, walls  # noqa: F401
 from .stepper import DiscreteStepper
 from .team_step import team_step
 
