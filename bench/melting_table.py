@@ -151,9 +151,10 @@ def plot(points, longest, path):
         ax.set_xlabel("area fraction")
         ax.set_ylabel("reduced pressure beta P d^2")
     axes[0].set_xlim(min(p[0] for p in points) - 0.003, max(p[0] for p in points) + 0.003)
-    axes[1].set_xlim(0.6925, max(p[0] for p in points) + 0.002)
+    loop_from = 0.6925  # the loop's panel: from here on, holding every point it shows, error bars and all
+    axes[1].set_xlim(loop_from, max(p[0] for p in points) + 0.002)
     near = [(float(row["reduced_pressure"]), float(row["reduced_pressure_se"])) for eta, *_, row in points
-            if eta > 0.6925]  # the loop's panel holds every point it shows, error bars and all
+            if eta > loop_from]
     axes[1].set_ylim(min(8.9, min(p - e for p, e in near) - 0.01), max(9.17, max(p + e for p, e in near) + 0.01))
     axes[1].set_title("the loop", fontsize=10)
     axes[0].legend(fontsize=8)

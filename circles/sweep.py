@@ -44,9 +44,9 @@ import sys
 import threading
 import time
 import uuid
-from pathlib import Path
 from dataclasses import dataclass, field, fields
 from numbers import Integral, Real
+from pathlib import Path
 
 from .command import (EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, SWEEP_TABLES, Parser, UsageError,
                       make_folder, sweep_or_scene)
@@ -618,14 +618,13 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         point = task[0]
         left[point] -= 1
         row = None
-        if left[point] > 0:
-            if not kept:
-                keep_task(out, sweep, *task, result)
-        else:
+        if left[point] == 0:
             row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
             file.write(row)
             rows.append(row)
             drop_tasks(out, sweep, point)  # results.csv holds them now
+        elif not kept:
+            keep_task(out, sweep, *task, result)
         if on_result is not None:
             on_result(task, result)
         if row is not None and on_row is not None:
