@@ -60,7 +60,7 @@ def main():
                            f"equilibration and {sweep.measure:g} of measurement in {sweep.blocks} "
                            f"block{'s' if sweep.blocks > 1 else ''} per point"))
         for values, row in sweeps.load_rows(results, sweep):
-            points.append((float(values["area_fraction"]), values.get("start", ""), sweep.repeats * sweep.measure,
+            points.append((float(values["area_fraction"]), values.get("start", ""), int(row["repeats"]) * sweep.measure,
                            sweep, values, row))
     points = join(points)
     lines = ["A task a core: " + ", ".join(f"`circles sweep {name}`" for name, _ in runs) + ", then `python bench/melting_table.py --out outputs/melting_sweep.md --plot outputs/melting_sweep.png`. "
@@ -99,8 +99,8 @@ def main():
 def join(points):
     """Rows of one point measured alike in several sweeps (the same scene but for its seed, the
     same equilibration, blocks and block length) as one row of their whole measured time: the
-    mean over all their blocks, each row weighted by its time measured, and the standard error
-    of that mean; their tasks' seconds added. Other rows as they are."""
+    mean and standard error of all their blocks in one (`circles.sweep.pooled`); their tasks'
+    seconds added. Other rows as they are."""
     groups = {}
     for point in points:
         eta, start, _, sweep, _, _ = point
@@ -113,8 +113,9 @@ def join(points):
         total = sum(m[2] for m in members)
         row = dict(first)
         for name in sweep.observables:
-            row[name] = repr(sum(m[2] * float(m[5][name]) for m in members) / total)
-            row[f"{name}_se"] = repr(math.sqrt(sum((m[2] * float(m[5][f"{name}_se"])) ** 2 for m in members)) / total)
+            mean, se = sweeps.pooled([(int(m[5]["repeats"]) * sweep.blocks, float(m[5][name]),
+                                       float(m[5][f"{name}_se"])) for m in members])
+            row[name], row[f"{name}_se"] = repr(mean), repr(se)
         row["task_seconds"] = repr(sum(float(m[5]["task_seconds"]) for m in members))
         joined.append((eta, start, total, sweep, values, row) if len(members) > 1 else members[0])
     return joined

@@ -111,8 +111,9 @@ class Sweep:
 
     def identity(self) -> dict:
         """What fixes the meaning of a row: the base scene, the names of the varied fields and
-        the measurement (not the values varied: a sweep may be extended)."""
-        identity = {"scene": self.scene, "varied": list(self.varied), "repeats": self.repeats,
+        the measurement (not the values varied, nor the repeats: a sweep may be extended, and
+        given more repeats)."""
+        identity = {"scene": self.scene, "varied": list(self.varied),
                     "equilibrate": self.equilibrate, "measure": self.measure, "blocks": self.blocks,
                     "observables": list(self.observables)}
         if self.checkpoint_every is not None:  # it cuts the equilibration into pieces: other bits
@@ -431,9 +432,10 @@ def _task_progress(path, task):
     return progress
 
 
-def point_row(sweep, index, results):
+def point_row(sweep, index, results, before=None):
     """A point's row of results.csv from its tasks' results, given in repeat order: for each
-    kept observable its mean over all blocks of all repeats and the standard error."""
+    kept observable its mean over all blocks of all repeats and the standard error. `before`:
+    the point's row of its first repeats, when `results` are the repeats added to them."""
     import numpy as np
 
     row = {key: json.dumps(value) for key, value in sweep.points[index].items()}
@@ -444,11 +446,30 @@ def point_row(sweep, index, results):
         samples = np.concatenate([np.asarray(r["blocks"][name], dtype=np.float64) for r in results])
         mean = float(np.mean(samples))
         se = float(np.std(samples, ddof=1) / math.sqrt(samples.size)) if samples.size > 1 else math.nan
+        if before is not None:
+            mean, se = pooled([(int(before["repeats"]) * sweep.blocks, float(before[name]), float(before[f"{name}_se"])),
+                               (samples.size, mean, se)])
         row[name] = repr(mean)
         row[f"{name}_se"] = repr(se)
-    row["pair_collisions"] = sum(int(r["pair_collisions"]) for r in results)
-    row["task_seconds"] = f"{sum(r['seconds'] for r in results):.3f}"
+    row["pair_collisions"] = sum(int(r["pair_collisions"]) for r in results) + int((before or {}).get(
+        "pair_collisions", 0))
+    row["task_seconds"] = f"{sum(r['seconds'] for r in results) + float((before or {}).get('task_seconds', 0)):.3f}"
     return row
+
+
+def pooled(parts):
+    """The mean and standard error of the samples of several parts in one, each part given as
+    (count, mean, standard error): the parts' sums of squared deviations, added with Chan et
+    al.'s term for the differences of their means, so that nothing but the three numbers of each
+    part is needed (the same to round-off as from all the samples)."""
+    count, mean, squares = 0, 0.0, 0.0
+    for size, part_mean, se in parts:
+        total = count + size
+        delta = part_mean - mean
+        squares += (se * se * size * (size - 1) if size > 1 else 0.0) + delta * delta * count * size / total
+        mean += delta * size / total
+        count = total
+    return mean, (math.sqrt(squares / (count - 1) / count) if count > 1 else math.nan)
 
 
 def columns(sweep):
@@ -481,7 +502,9 @@ def read_results(out, sweep):
                 held = json.load(file)
             except json.JSONDecodeError:
                 held = None
-        if held != {"fingerprint": _fingerprint(sweep), **sweep.identity()}:
+        # A folder written when the repeats were part of a sweep's identity has them in its file.
+        if not isinstance(held, dict) or {k: v for k, v in held.items() if k not in ("fingerprint", "repeats")} \
+                != sweep.identity():
             raise SweepError(f"{out} holds the results of another sweep (its [scene], varied fields or [sweep] "
                              f"differ from {sweep.source or 'this one'}'s): give another --out, or remove {out}")
     elif os.path.exists(results):
@@ -498,7 +521,12 @@ def read_results(out, sweep):
     rows = list(csv.DictReader(lines))
     if lines and next(csv.reader(lines[:1])) != columns(sweep):
         raise SweepError(f"{results} has other columns than this sweep writes: give another --out, or remove it")
-    return {_point_key(json.loads(row[k]) for k in sweep.varied): row for row in rows}
+    rows = {_point_key(json.loads(row[k]) for k in sweep.varied): row for row in rows}
+    most = max((int(row["repeats"]) for row in rows.values()), default=0)
+    if most > sweep.repeats:
+        raise SweepError(f"{results} holds points of {most} repeats, more than the {sweep.repeats} of "
+                         f"{sweep.source or 'this sweep'}: set repeats = {most} or more, or give another --out")
+    return rows
 
 
 class _ResultsFile:
@@ -517,9 +545,27 @@ class _ResultsFile:
             self.writer.writeheader()
             self._sync()
 
-    def write(self, row):
-        self.writer.writerow(row)
-        self._sync()
+    def write(self, row, replaces=None):
+        """Append `row`; with `replaces` (the row it takes the place of), write the file anew
+        without that one, whole (renamed into place once on disk)."""
+        if replaces is None:
+            self.writer.writerow(row)
+            self._sync()
+            return
+        from .storage import replaced_whole
+
+        self.file.close()
+        with open(self.path, newline="") as file:
+            rows = [r for r in csv.DictReader(file) if r != replaces]
+        with replaced_whole(self.path) as part:
+            with open(part, "w", newline="") as file:
+                writer = csv.DictWriter(file, self.columns, lineterminator="\n")
+                writer.writeheader()
+                writer.writerows([*rows, row])
+                file.flush()
+                os.fsync(file.fileno())
+        self.file = open(self.path, "a", newline="")
+        self.writer = csv.DictWriter(self.file, self.columns, lineterminator="\n")
 
     def _sync(self):
         self.file.flush()
@@ -599,17 +645,20 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
     repeat): on the Dask `client` (each task's key ends in -POINT-REPEAT) (distributed.Client) when given, else one by one in this
     process. A row is appended to DIR/results.csv when a point's last task ends; until then each
     finished task's result is kept in DIR/tasks/ (`keep_task`), so that a run stopped mid-point
-    does not run it again. `on_row(row)` and `on_result((point, repeat), result)` are called as
+    does not run it again. A point whose row has fewer repeats than the sweep runs the others,
+    and its row is written anew with all of them. `on_row(row)` and `on_result((point, repeat), result)` are called as
     they come (first for the results kept). `threads`: Taichi's threads in each worker process
     (None: the worker's own thread count)."""
     started = time.perf_counter()
     done = read_results(out, sweep)
-    todo = [i for i, values in enumerate(sweep.points) if _point_key(values.values()) not in done]
+    before = {i: row for i, values in enumerate(sweep.points) if (row := done.get(_point_key(values.values())))}
+    first = {i: int(row["repeats"]) for i, row in before.items()}  # a row of fewer repeats gets the others
+    todo = [i for i in range(len(sweep.points)) if first.get(i, 0) < sweep.repeats]
     skipped = [i for i in range(len(sweep.points)) if i not in set(todo)]
-    tasks = [(p, r) for p in todo for r in range(sweep.repeats)]
+    tasks = [(p, r) for p in todo for r in range(first.get(p, 0), sweep.repeats)]
     file = _ResultsFile(out, sweep)
     results, rows = {}, []
-    left = {p: sweep.repeats for p in todo}
+    left = {p: sweep.repeats - first.get(p, 0) for p in todo}
 
     def finished(task, result, kept=False):
         """Keep the result (a task file, or the point's row when it is the last), then call back:
@@ -619,8 +668,9 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         left[point] -= 1
         row = None
         if left[point] == 0:
-            row = point_row(sweep, point, [results[(point, r)] for r in range(sweep.repeats)])
-            file.write(row)
+            row = point_row(sweep, point, [results[(point, r)] for r in range(first.get(point, 0), sweep.repeats)],
+                            before.get(point))
+            file.write(row, replaces=before.get(point))
             rows.append(row)
             drop_tasks(out, sweep, point)  # results.csv holds them now
         elif not kept:

@@ -668,6 +668,70 @@ def test_a_sweep_stopped_on_a_cluster_runs_again_only_the_tasks_not_done(serial,
     assert table(out) == table(serial_out)
 
 
+def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_path, capsys):
+    """The tiny sweep done with two repeats, run again with four: only repeats 2 and 3 of each
+    point run, and each row is written anew with all four, as a run of four repeats in one go
+    gives (the means and standard errors to round-off, the rest exactly). Stopped after one new
+    task, the rows of two repeats stay whole and the task waits in DIR/tasks/. Fewer repeats
+    than the rows hold are refused before any work."""
+    import shutil
+
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    shutil.copytree(serial_out, out)
+    four = sweeps.read_sweep(write(tmp_path, TINY.replace("repeats = 2", "repeats = 4"), "four.toml"))
+    whole = tmp_path / "whole"
+    sweeps.run_sweep(four, whole)
+    on_result, seen = stop_after(1)
+    with pytest.raises(KeyboardInterrupt):
+        sweeps.run_sweep(four, out, on_result=on_result)
+    assert table(out) == table(serial_out) and list(seen) == [(0, 2)]
+    ran = []
+    run = sweeps.run_sweep(four, out, on_result=lambda task, result: ran.append(task))
+    assert run.kept == [(0, 2)] and ran == [(0, 2), (0, 3), (1, 2), (1, 3), (2, 2), (2, 3)] and run.ran == [0, 1, 2]
+    grown, expect = table(out), table(whole)
+    assert sorted(grown) == sorted(expect) and len((out / "results.csv").read_text().splitlines()) == 4
+    for phi, numbers in expect.items():
+        for column, got, want in zip(NUMBERS, grown[phi], numbers):
+            if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
+                assert got == want, (phi, column)
+            else:
+                assert math.isclose(float(got), float(want), rel_tol=1e-9, abs_tol=1e-24), (phi, column, got, want)
+    assert sweeps.run_sweep(four, out).ran == [] and not (out / sweeps.TASKS).exists()
+    before = (out / "results.csv").read_bytes()
+    assert sweeps.main(["sweep", str(write(tmp_path, TINY, "two.toml")), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "4 repeats" in err and "repeats = 4" in err and "two.toml" in err and len(err.splitlines()) == 1
+    assert (out / "results.csv").read_bytes() == before
+
+
+def test_pooled_parts_have_the_mean_and_standard_error_of_all_their_samples():
+    rng = np.random.default_rng(5)
+    for sizes in ((1, 4), (7, 3), (40, 1), (12, 12), (3, 5, 1, 9)):
+        parts = [rng.normal(9.0 + 0.1 * i, 0.3, size) for i, size in enumerate(sizes)]
+        mean, se = sweeps.pooled([(p.size, float(np.mean(p)), float(np.std(p, ddof=1) / math.sqrt(p.size))
+                                   if p.size > 1 else math.nan) for p in parts])
+        every = np.concatenate(parts)
+        assert math.isclose(mean, float(np.mean(every)), rel_tol=1e-13)
+        assert math.isclose(se, float(np.std(every, ddof=1) / math.sqrt(every.size)), rel_tol=1e-11)
+    assert sweeps.pooled([(1, 2.5, math.nan)]) == (2.5, pytest.approx(math.nan, nan_ok=True))
+
+
+def test_a_folder_whose_sweep_json_names_its_repeats_is_the_same_sweep(serial, tmp_path):
+    """Folders written when the repeats were part of a sweep's identity (sweep.json holds them,
+    and a fingerprint with them) are still this sweep's: a rerun skips their points."""
+    import hashlib
+    import shutil
+
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    shutil.copytree(serial_out, out)
+    old = {**sweep.identity(), "repeats": 2}
+    digest = hashlib.sha256(json.dumps(old, sort_keys=True).encode()).hexdigest()
+    (out / "sweep.json").write_text(json.dumps({"fingerprint": digest, **old}))
+    assert sweeps.run_sweep(sweep, out).ran == [] and table(out) == table(serial_out)
+
+
 def test_a_rerun_over_an_empty_results_csv_writes_its_header_and_every_point(serial, tmp_path):
     """results.csv of no bytes beside the sweep's sweep.json (a stop as the file was made): the
     rerun writes the header once and runs every point, and the table ends as the serial one."""
@@ -1114,7 +1178,7 @@ def test_a_figure_holds_the_points_their_errors_and_the_theory_curve(serial):
 
 
 def test_sweep_json_records_what_fixes_the_rows(serial, tmp_path):
-    """DIR/sweep.json: the base scene, the varied fields and the measurement, and the SHA-256 of
+    """DIR/sweep.json: the base scene, the varied fields and the measurement (not the repeats), and the SHA-256 of
     them as sorted JSON, worked out here; checkpoint_every only when given."""
     import hashlib
 
@@ -1122,7 +1186,7 @@ def test_sweep_json_records_what_fixes_the_rows(serial, tmp_path):
     held = json.loads((out / "sweep.json").read_text())
     identity = {"scene": {"n": 40, "radius": 0.05, "speed": [1.0, 1.0], "mass": "equal", "boundary": "periodic",
                           "seed": 3},
-                "varied": ["area_fraction"], "repeats": 2, "equilibrate": 0.5, "measure": 2.0, "blocks": 4,
+                "varied": ["area_fraction"], "equilibrate": 0.5, "measure": 2.0, "blocks": 4,
                 "observables": ["compressibility", "collision_rate", "energy_change"]}
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
     assert held == {"fingerprint": digest, **identity}
@@ -1604,7 +1668,7 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
     assert at_0718.scene["seed"] not in (at_0714.scene["seed"], more.scene["seed"], longer.scene["seed"],
                                          melting.scene["seed"])
     assert at_0718.points == [p for p in melting.points if p["area_fraction"] == 0.718] and len(at_0718.points) == 2
-    assert at_0718.identity() == {**at_0714.identity(), "scene": at_0718.scene, "repeats": 8}
+    assert at_0718.identity() == {**at_0714.identity(), "scene": at_0718.scene} and at_0718.repeats == 8
 
 
 def test_the_large_melting_sweep_is_engel_s_square_box_compared_with_engel_s_molecular_dynamics():
@@ -1626,8 +1690,9 @@ def test_the_large_melting_sweep_is_engel_s_square_box_compared_with_engel_s_mol
 
 def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_whole_time(tmp_path):
     """bench/melting_table.py: two sweeps of one point measured alike (seeds apart) give one row:
-    the mean over all their blocks (each row weighted by its time measured) and its standard
-    error, worked out here; a point measured otherwise keeps its own row."""
+    the mean and standard error of all their blocks in one (2 x 4 blocks of mean 2.0 and 6 x 4
+    of mean 3.0: their spreads and the difference of their means, worked out here); a point
+    measured otherwise keeps its own row."""
     import importlib.util
     import sys
     from pathlib import Path
@@ -1643,14 +1708,15 @@ def test_the_melting_table_joins_a_points_rows_measured_alike_into_one_of_their_
     b = sweeps.read_sweep(write(tmp_path, text.replace("seed = 3", "seed = 4").replace("repeats = 2", "repeats = 6"),
                                 "b.toml"))
     shorter = sweeps.read_sweep(write(tmp_path, text.replace("measure = 2.0", "measure = 1.0"), "c.toml"))
-    row = lambda z, se, s: {"compressibility": str(z), "compressibility_se": str(se), "task_seconds": str(s)}  # noqa: E731
+    row = lambda z, se, s, n: {"compressibility": str(z), "compressibility_se": str(se), "task_seconds": str(s),  # noqa: E731
+                               "repeats": str(n)}
     values = {"area_fraction": 0.3}
-    points = [(0.3, "", 4.0, a, values, row(2.0, 0.3, 10.0)), (0.3, "", 12.0, b, values, row(3.0, 0.1, 30.0)),
-              (0.3, "", 2.0, shorter, values, row(9.0, 1.0, 5.0))]
+    points = [(0.3, "", 4.0, a, values, row(2.0, 0.3, 10.0, 2)), (0.3, "", 12.0, b, values, row(3.0, 0.1, 30.0, 6)),
+              (0.3, "", 2.0, shorter, values, row(9.0, 1.0, 5.0, 2))]
     (eta, start, measured, _, _, joined), alone = table_.join(points)
     assert (eta, start, measured) == (0.3, "", 16.0)
-    assert float(joined["compressibility"]) == pytest.approx((4 * 2.0 + 12 * 3.0) / 16, rel=1e-15)
-    assert float(joined["compressibility_se"]) == pytest.approx(math.sqrt((4 * 0.3) ** 2 + (12 * 0.1) ** 2) / 16,
-                                                                rel=1e-15)
+    assert float(joined["compressibility"]) == pytest.approx((8 * 2.0 + 24 * 3.0) / 32, rel=1e-15)
+    squares = 0.3 ** 2 * 8 * 7 + 0.1 ** 2 * 24 * 23 + (3.0 - 2.0) ** 2 * 8 * 24 / 32
+    assert float(joined["compressibility_se"]) == pytest.approx(math.sqrt(squares / 31 / 32), rel=1e-14)
     assert float(joined["task_seconds"]) == 40.0
     assert alone == points[2]
