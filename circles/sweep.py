@@ -71,6 +71,7 @@ TABLES = SWEEP_TABLES
 #: The name of the results file in the output folder, and of the file that fixes the sweep it
 #: belongs to (a rerun with another base scene or [sweep] table is refused).
 RESULTS = "results.csv"
+RUNS = "runs.csv"
 IDENTITY = "sweep.json"
 #: The folder of the tasks' checkpoints, in the output folder, with [sweep] checkpoint_every.
 CHECKPOINTS = "checkpoints"
@@ -441,8 +442,7 @@ def point_row(sweep, index, results, before=None):
     row = {key: json.dumps(value) for key, value in sweep.points[index].items()}
     row["repeats"] = sweep.repeats
     row["blocks"] = sweep.blocks
-    names = list(sweep.observables) + (["temperature"] if "temperature" not in sweep.observables else [])
-    for name in names:
+    for name in _names(sweep):
         samples = np.concatenate([np.asarray(r["blocks"][name], dtype=np.float64) for r in results])
         mean = float(np.mean(samples))
         se = float(np.std(samples, ddof=1) / math.sqrt(samples.size)) if samples.size > 1 else math.nan
@@ -476,12 +476,35 @@ def columns(sweep):
     """The columns of results.csv: the varied fields, repeats and blocks, each observable and
     its standard error (the temperature always), the pair collisions measured, the tasks'
     seconds."""
-    names = list(sweep.observables) + (["temperature"] if "temperature" not in sweep.observables else [])
-    return [*sweep.varied, "repeats", "blocks", *[c for n in names for c in (n, f"{n}_se")], "pair_collisions",
+    return [*sweep.varied, "repeats", "blocks", *[c for n in _names(sweep) for c in (n, f"{n}_se")], "pair_collisions",
             "task_seconds"]
 
 
-# ---- results.csv ------------------------------------------------------------------------
+def run_columns(sweep):
+    """The columns of runs.csv: the varied fields, the repeat and its seed, each observable's
+    mean over the task's blocks (the temperature always), its pair collisions and seconds."""
+    return [*sweep.varied, "repeat", "seed", *_names(sweep), "pair_collisions", "task_seconds"]
+
+
+def run_row(sweep, point, repeat, result):
+    """A task's row of runs.csv."""
+    import numpy as np
+
+    row = {key: json.dumps(value) for key, value in sweep.points[point].items()}
+    row["repeat"] = repeat
+    row["seed"] = sweep.point_scene(point, repeat)["seed"]
+    for name in _names(sweep):
+        row[name] = repr(float(np.mean(np.asarray(result["blocks"][name], dtype=np.float64))))
+    row["pair_collisions"] = int(result["pair_collisions"])
+    row["task_seconds"] = f"{result['seconds']:.3f}"
+    return row
+
+
+def _names(sweep):
+    return list(sweep.observables) + (["temperature"] if "temperature" not in sweep.observables else [])
+
+
+# ---- results.csv and runs.csv ---------------------------------------------------------------
 
 def _fingerprint(sweep):
     return hashlib.sha256(json.dumps(sweep.identity(), sort_keys=True).encode()).hexdigest()
@@ -509,19 +532,7 @@ def read_results(out, sweep):
                              f"differ from {sweep.source or 'this one'}'s): give another --out, or remove {out}")
     elif os.path.exists(results):
         raise SweepError(f"{results} exists without {IDENTITY}: give another --out, or remove {results}")
-    if not os.path.exists(results):
-        return {}
-    with open(results, "rb+") as file:
-        data = file.read()
-        if data and not data.endswith(b"\n"):
-            keep = data.rfind(b"\n") + 1
-            file.truncate(keep)
-            data = data[:keep]
-    lines = data.decode().splitlines()
-    rows = list(csv.DictReader(lines))
-    if lines and next(csv.reader(lines[:1])) != columns(sweep):
-        raise SweepError(f"{results} has other columns than this sweep writes: give another --out, or remove it")
-    rows = {_point_key(json.loads(row[k]) for k in sweep.varied): row for row in rows}
+    rows = {_point_key(json.loads(row[k]) for k in sweep.varied): row for row in _read_rows(results, columns(sweep))}
     most = max((int(row["repeats"]) for row in rows.values()), default=0)
     if most > sweep.repeats:
         raise SweepError(f"{results} holds points of {most} repeats, more than the {sweep.repeats} of "
@@ -529,15 +540,43 @@ def read_results(out, sweep):
     return rows
 
 
-class _ResultsFile:
-    """DIR/results.csv, a row appended and flushed to disk per finished point."""
+def read_runs(out, sweep):
+    """{(point key, repeat): row} of the tasks DIR/runs.csv holds (a last line cut short by a
+    stop is dropped, and cut off the file)."""
+    rows = _read_rows(os.path.join(out, RUNS), run_columns(sweep))
+    return {(_point_key(json.loads(row[k]) for k in sweep.varied), int(row["repeat"])): row for row in rows}
 
-    def __init__(self, out, sweep):
-        os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, IDENTITY), "w") as file:
-            json.dump({"fingerprint": _fingerprint(sweep), **sweep.identity()}, file, indent=1)
-        self.path = os.path.join(out, RESULTS)
-        self.columns = columns(sweep)
+
+def _read_rows(path, names):
+    """The rows of the CSV file at `path` (none when it is missing), its last line dropped and
+    cut off the file when a stop left it short; refused when its header is not `names`."""
+    if not os.path.exists(path):
+        return []
+    with open(path, "rb+") as file:
+        data = file.read()
+        if data and not data.endswith(b"\n"):
+            keep = data.rfind(b"\n") + 1
+            file.truncate(keep)
+            data = data[:keep]
+    lines = data.decode().splitlines()
+    if lines and next(csv.reader(lines[:1])) != names:
+        raise SweepError(f"{path} has other columns than this sweep writes: give another --out, or remove it")
+    return list(csv.DictReader(lines))
+
+
+def _write_identity(out, sweep):
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, IDENTITY), "w") as file:
+        json.dump({"fingerprint": _fingerprint(sweep), **sweep.identity()}, file, indent=1)
+
+
+class _CsvFile:
+    """A CSV file of the sweep's folder (results.csv, runs.csv), a row appended and flushed to
+    disk as it comes."""
+
+    def __init__(self, path, names):
+        self.path = path
+        self.columns = names
         new = not os.path.exists(self.path) or os.path.getsize(self.path) == 0
         self.file = open(self.path, "a", newline="")
         self.writer = csv.DictWriter(self.file, self.columns, lineterminator="\n")
@@ -643,7 +682,8 @@ class SweepRun:
 def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None):
     """Run the points of `sweep` that DIR/results.csv does not hold yet, a task per (point,
     repeat): on the Dask `client` (each task's key ends in -POINT-REPEAT) (distributed.Client) when given, else one by one in this
-    process. A row is appended to DIR/results.csv when a point's last task ends; until then each
+    process. Each task's own row is appended to DIR/runs.csv as it ends (`run_row`), once. A row
+    is appended to DIR/results.csv when a point's last task ends; until then each
     finished task's result is kept in DIR/tasks/ (`keep_task`), so that a run stopped mid-point
     does not run it again. A point whose row has fewer repeats than the sweep runs the others,
     and its row is written anew with all of them. `on_row(row)` and `on_result((point, repeat), result)` are called as
@@ -656,7 +696,10 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
     todo = [i for i in range(len(sweep.points)) if first.get(i, 0) < sweep.repeats]
     skipped = [i for i in range(len(sweep.points)) if i not in set(todo)]
     tasks = [(p, r) for p in todo for r in range(first.get(p, 0), sweep.repeats)]
-    file = _ResultsFile(out, sweep)
+    logged = set(read_runs(out, sweep))
+    _write_identity(out, sweep)
+    file = _CsvFile(os.path.join(out, RESULTS), columns(sweep))
+    log = _CsvFile(os.path.join(out, RUNS), run_columns(sweep))
     results, rows = {}, []
     left = {p: sweep.repeats - first.get(p, 0) for p in todo}
 
@@ -665,6 +708,9 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
         a stop raised by a callback loses nothing that had ended."""
         results[task] = result
         point = task[0]
+        if (key := (_point_key(sweep.points[point].values()), task[1])) not in logged:  # a task run again: once
+            log.write(run_row(sweep, *task, result))
+            logged.add(key)
         left[point] -= 1
         row = None
         if left[point] == 0:
@@ -718,6 +764,7 @@ def run_sweep(sweep, out, client=None, threads=None, on_row=None, on_result=None
                     future.cancel()
     finally:
         file.close()
+        log.close()
     if checkpoints is not None and not any(p.endswith(".gsd") for p in os.listdir(checkpoints)):
         shutil.rmtree(checkpoints, ignore_errors=True)  # every task ended: what is left are temporary names
     if os.path.isdir(held) and not any(p.endswith(".json") for p in os.listdir(held)):

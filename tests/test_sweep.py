@@ -64,6 +64,15 @@ def table(out):
         return {row["area_fraction"]: [row[c] for c in NUMBERS] for row in csv.DictReader(file)}
 
 
+def runs(out):
+    """{(area_fraction, repeat): the task's row of out/runs.csv but its seconds}, and the count
+    of its rows."""
+    with open(out / "runs.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    return {(row["area_fraction"], row["repeat"]): {k: v for k, v in row.items() if k != "task_seconds"}
+            for row in rows}, len(rows)
+
+
 @pytest.fixture(scope="module")
 def cluster():
     cluster = sweeps.local_cluster(2)
@@ -93,6 +102,24 @@ def test_serial_sweep_measures_the_hard_disk_fluid(serial):
         assert abs(float(row[NUMBERS.index("energy_change")])) < 1e-13
 
 
+def test_runs_csv_holds_each_task_and_its_point_s_row_is_their_mean(serial):
+    """DIR/runs.csv: a row per task with its repeat's seed and its own means; with blocks alike,
+    a point's mean is the mean of its tasks' means, and its pair collisions their sum."""
+    sweep, out = serial
+    held, count = runs(out)
+    assert count == 6 and sorted(held) == [(phi, str(r)) for phi in ("0.1", "0.3", "0.5") for r in (0, 1)]
+    assert list(next(iter(held.values()))) == [c for c in sweeps.run_columns(sweep) if c != "task_seconds"]
+    with open(out / "results.csv", newline="") as file:
+        points = {row["area_fraction"]: row for row in csv.DictReader(file)}
+    for (phi, repeat), row in held.items():
+        assert int(row["seed"]) == sweeps.repeat_seed(3, int(repeat))
+    for phi, point in points.items():
+        tasks = [held[phi, str(r)] for r in range(2)]
+        for name in ("compressibility", "collision_rate", "temperature"):
+            assert float(point[name]) == pytest.approx(np.mean([float(t[name]) for t in tasks]), rel=1e-13)
+        assert int(point["pair_collisions"]) == sum(int(t["pair_collisions"]) for t in tasks)
+
+
 @pytest.mark.cluster
 def test_local_cluster_gives_the_serial_numbers(serial, cluster, tmp_path):
     sweep, serial_out = serial
@@ -100,6 +127,7 @@ def test_local_cluster_gives_the_serial_numbers(serial, cluster, tmp_path):
     assert run.ran == [0, 1, 2] and run.skipped == []
     assert {r["pid"] for r in run.results.values()} <= set(cluster.run(os.getpid).values())
     assert table(tmp_path / "out") == table(serial_out)
+    assert runs(tmp_path / "out") == runs(serial_out)
 
 
 @pytest.mark.cluster
@@ -612,6 +640,7 @@ def test_a_sweep_stopped_mid_point_keeps_its_finished_tasks_and_the_rerun_takes_
     assert run.kept == [(1, 0)] and same(run.results[1, 0], seen[1, 0])
     assert ran == [(1, 0), (1, 1), (2, 0), (2, 1)] and run.ran == [1, 2]
     assert table(out) == table(serial_out)
+    assert runs(out) == runs(serial_out)  # the kept task's row once
     assert not (out / sweeps.TASKS).exists()
     # A stop between a point's row and the removal of its tasks' files: the next run removes them.
     sweeps.keep_task(out, sweep, 2, 1, run.results[2, 1])
@@ -698,6 +727,7 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
             else:
                 assert math.isclose(float(got), float(want), rel_tol=1e-9, abs_tol=1e-24), (phi, column, got, want)
     assert sweeps.run_sweep(four, out).ran == [] and not (out / sweeps.TASKS).exists()
+    assert runs(out) == runs(whole)
     before = (out / "results.csv").read_bytes()
     assert sweeps.main(["sweep", str(write(tmp_path, TINY, "two.toml")), "--workers", "0", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
