@@ -26,8 +26,10 @@ point's value is the mean over all blocks of all its repeats, with its standard 
 spread of those block values over the square root of their count).
 
 `run_sweep` streams a row per point into ``DIR/results.csv`` as the point's last task ends,
-skips the points the file holds already, keeps each finished task of a point not yet done in
-``DIR/tasks/`` for a rerun to take, and draws a plot per observable (`plot_sweep`).
+and a row per task into ``DIR/runs.csv``; it skips the points the file holds already (with as
+many repeats: a point of fewer runs only the others), keeps each finished task of a point
+not yet done in ``DIR/tasks/`` for a rerun to take, and draws a plot per observable
+(`plot_sweep`).
 Tasks are independent and their results are put together in repeat order, so the numbers
 are the same whatever the number of workers or the order in which tasks finish.
 """
@@ -68,8 +70,9 @@ MOST_TASKS = 100_000
 MOST_DURATION = 1e12
 #: The top-level tables of a sweep file.
 TABLES = SWEEP_TABLES
-#: The name of the results file in the output folder, and of the file that fixes the sweep it
-#: belongs to (a rerun with another base scene or [sweep] table is refused).
+#: The names of the results file in the output folder (a row a point), of the file of a row a
+#: task, and of the file that fixes the sweep they belong to (a rerun with another base scene or
+#: [sweep] table, but for its repeats, is refused).
 RESULTS = "results.csv"
 RUNS = "runs.csv"
 IDENTITY = "sweep.json"

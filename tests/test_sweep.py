@@ -177,7 +177,9 @@ def test_a_worker_killed_mid_sweep_loses_no_point(serial, cluster, tmp_path):
     assert killed["keys"], "no task was running on the killed worker"
     assert len(run.rows) == 3 and len(run.results) == 3 * longer.repeats
     lost = [tuple(int(i) for i in key.rsplit("-", 2)[1:]) for key in killed["keys"]]
-    assert lost and all(run.results[t]["pid"] != killed["pid"] for t in lost)
+    # The scheduler's list may still hold a task that ended as the kill came (its result from the
+    # killed process): at least one of them, the one running, ran again on another.
+    assert lost and any(run.results[t]["pid"] != killed["pid"] for t in lost)
     serial_out = tmp_path / "serial"
     sweeps.run_sweep(longer, serial_out)
     assert table(tmp_path / "out") == table(serial_out)
