@@ -79,7 +79,7 @@ def main():
         else:
             published, z = "", ""
         order = f"{float(row['hexatic_order']):.3f}" if "hexatic_order" in row else ""
-        lines.append(f"| {eta:.3f} | {start} | {measured:g} | {got:.4f} ± {se:.4f} | {published} | {z} | {order} | "
+        lines.append(f"| {eta:.3f} | {start} | {measured:.0f} | {got:.4f} ± {se:.4f} | {published} | {z} | {order} | "
                      f"{float(row['task_seconds']):.0f} |")
         longest[(start, round(eta, 6))] = (got, se, measured)  # sorted by the time measured: the longest last
     lines.append("")
