@@ -739,7 +739,7 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
 
 def test_pooled_parts_have_the_mean_and_standard_error_of_all_their_samples():
     rng = np.random.default_rng(5)
-    for sizes in ((1, 4), (7, 3), (40, 1), (12, 12), (3, 5, 1, 9)):
+    for sizes in ((1, 4), (7, 3), (40, 1), (12, 12), (3, 5, 1, 9), (2, 3), (1, 1)):
         parts = [rng.normal(9.0 + 0.1 * i, 0.3, size) for i, size in enumerate(sizes)]
         mean, se = sweeps.pooled([(p.size, float(np.mean(p)), float(np.std(p, ddof=1) / math.sqrt(p.size))
                                    if p.size > 1 else math.nan) for p in parts])
