@@ -700,17 +700,19 @@ def test_a_sweep_stopped_on_a_cluster_runs_again_only_the_tasks_not_done(serial,
 
 
 def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_path, capsys):
-    """The tiny sweep done with two repeats, run again with four: only repeats 2 and 3 of each
-    point run, and each row is written anew with all four, as a run of four repeats in one go
-    gives (the means and standard errors to round-off, the rest exactly). Stopped after one new
-    task, the rows of two repeats stay whole and the task waits in DIR/tasks/. Fewer repeats
-    than the rows hold are refused before any work."""
+    """The tiny sweep done with two repeats, run again with four and a point added: only repeats
+    2 and 3 of each point done run, and each row is written anew with all four, as a run of four
+    repeats in one go gives (the means and standard errors to round-off, the rest exactly); the
+    new point's row is appended after the rewritten ones, in the file's own line ends. Stopped
+    after one new task, the rows of two repeats stay whole and the task waits in DIR/tasks/.
+    Fewer repeats than the rows hold are refused before any work."""
     import shutil
 
     sweep, serial_out = serial
     out = tmp_path / "out"
     shutil.copytree(serial_out, out)
-    four = sweeps.read_sweep(write(tmp_path, TINY.replace("repeats = 2", "repeats = 4"), "four.toml"))
+    four = sweeps.read_sweep(write(tmp_path, TINY.replace("repeats = 2", "repeats = 4")
+                                   .replace("[0.1, 0.3, 0.5]", "[0.1, 0.3, 0.5, 0.4]"), "four.toml"))
     whole = tmp_path / "whole"
     sweeps.run_sweep(four, whole)
     on_result, seen = stop_after(1)
@@ -719,9 +721,11 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
     assert table(out) == table(serial_out) and list(seen) == [(0, 2)]
     ran = []
     run = sweeps.run_sweep(four, out, on_result=lambda task, result: ran.append(task))
-    assert run.kept == [(0, 2)] and ran == [(0, 2), (0, 3), (1, 2), (1, 3), (2, 2), (2, 3)] and run.ran == [0, 1, 2]
+    assert run.kept == [(0, 2)] and run.ran == [0, 1, 2, 3]
+    assert ran == [(0, 2), (0, 3), (1, 2), (1, 3), (2, 2), (2, 3), (3, 0), (3, 1), (3, 2), (3, 3)]
     grown, expect = table(out), table(whole)
-    assert sorted(grown) == sorted(expect) and len((out / "results.csv").read_text().splitlines()) == 4
+    assert sorted(grown) == sorted(expect) and list(grown)[-1] == "0.4"
+    assert (out / "results.csv").read_bytes().count(b"\n") == 5 and b"\r" not in (out / "results.csv").read_bytes()
     for phi, numbers in expect.items():
         for column, got, want in zip(NUMBERS, grown[phi], numbers):
             if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
