@@ -118,6 +118,10 @@ def test_runs_csv_holds_each_task_and_its_point_s_row_is_their_mean(serial):
         for name in ("compressibility", "collision_rate", "temperature"):
             assert float(point[name]) == pytest.approx(np.mean([float(t[name]) for t in tasks]), rel=1e-13)
         assert int(point["pair_collisions"]) == sum(int(t["pair_collisions"]) for t in tasks)
+    with open(out / "runs.csv", newline="") as file:
+        seconds = [float(row["task_seconds"]) for row in csv.DictReader(file)]
+    total = sum(float(point["task_seconds"]) for point in points.values())
+    assert min(seconds) > 0 and sum(seconds) == pytest.approx(total, abs=0.001 * len(seconds))  # each to 1 ms
 
 
 @pytest.mark.cluster
