@@ -581,8 +581,7 @@ class _CsvFile:
         self.path = path
         self.columns = names
         new = not os.path.exists(self.path) or os.path.getsize(self.path) == 0
-        self.file = open(self.path, "a", newline="")
-        self.writer = csv.DictWriter(self.file, self.columns, lineterminator="\n")
+        self._open()
         if new:
             self.writer.writeheader()
             self._sync()
@@ -606,6 +605,10 @@ class _CsvFile:
                 writer.writerows([*rows, row])
                 file.flush()
                 os.fsync(file.fileno())
+        self._open()
+
+    def _open(self):
+        """Open the file to append rows to."""
         self.file = open(self.path, "a", newline="")
         self.writer = csv.DictWriter(self.file, self.columns, lineterminator="\n")
 
