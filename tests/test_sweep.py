@@ -537,13 +537,13 @@ def test_the_command_runs_a_sweep_on_a_local_cluster_and_plots_it(serial, tmp_pa
     said = capsys.readouterr().out
     lines = said.splitlines()
     assert lines[0] == "sweep       3 points x 2 repeats on a local cluster of 2 worker processes, 2 threads each"
-    assert lines[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
+    assert lines[4].startswith(f"done        3 points run (6 tasks), 0 already in {out / 'results.csv'}, ")
     assert "deviation of Z from Liu's" in said
     assert table(out) == table(serial_out)
     for name in sweep.observables:
         assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
-    assert "0 points run, 3 already in" in capsys.readouterr().out
+    assert "0 points run (0 tasks), 3 already in" in capsys.readouterr().out
 
 
 def test_the_command_runs_a_sweep_in_this_process_and_plots_it(serial, tmp_path, capsys):
@@ -554,7 +554,7 @@ def test_the_command_runs_a_sweep_in_this_process_and_plots_it(serial, tmp_path,
     out = tmp_path / "out"
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "this process, task by task" in said and "3 points run, 0 already in" in said
+    assert "this process, task by task" in said and "3 points run (6 tasks), 0 already in" in said
     assert said.count("point       area_fraction") == 3
     worst = max(sweeps.deviations(sweep, sweeps.load_rows(out, sweep)), key=lambda d: abs(d[3]))
     assert f"{100 * worst[3]:+.2f}% ({worst[4]:+.1f} standard errors) at area fraction {worst[0]:g}" in said
@@ -562,7 +562,7 @@ def test_the_command_runs_a_sweep_in_this_process_and_plots_it(serial, tmp_path,
     for name in sweep.observables:
         assert (out / f"{name}.png").stat().st_size > 10_000
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
-    assert "0 points run, 3 already in" in capsys.readouterr().out
+    assert "0 points run (0 tasks), 3 already in" in capsys.readouterr().out
 
 
 @pytest.mark.cluster
@@ -577,7 +577,7 @@ def test_the_command_uses_a_running_scheduler(serial, cluster, tmp_path, capsys)
     assert executed(cluster) - before == 3 * 2  # every task on that cluster, not here or on a cluster of its own
     said = capsys.readouterr().out.splitlines()
     assert said[0] == f"sweep       3 points x 2 repeats on the Dask scheduler at {address}"
-    assert said[4].startswith(f"done        3 points run, 0 already in {out / 'results.csv'}, ")
+    assert said[4].startswith(f"done        3 points run (6 tasks), 0 already in {out / 'results.csv'}, ")
     assert table(out) == table(serial_out)
 
 
@@ -743,6 +743,10 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
     err = capsys.readouterr().err.strip()
     assert "4 repeats" in err and "repeats = 4" in err and "two.toml" in err and len(err.splitlines()) == 1
     assert (out / "results.csv").read_bytes() == before
+    six = write(tmp_path, TINY.replace("repeats = 2", "repeats = 6").replace("[0.1, 0.3, 0.5]", "[0.1, 0.3, 0.5, 0.4]"),
+                "six.toml")
+    assert sweeps.main(["sweep", str(six), "--workers", "0", "--out", str(out)]) == 0
+    assert f"done        4 points run (8 tasks), 0 already in {out / 'results.csv'}, " in capsys.readouterr().out
 
 
 def test_pooled_parts_have_the_mean_and_standard_error_of_all_their_samples():
@@ -922,7 +926,7 @@ def test_the_command_says_what_it_ran_line_by_line(serial, tmp_path, capsys):
     worst = max(sweeps.deviations(sweep, rows), key=lambda d: abs(d[3]))
     assert lines[0] == "sweep       3 points x 2 repeats on this process, task by task"
     assert lines[1:4] == points
-    assert re.fullmatch(rf"done        3 points run, 0 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
+    assert re.fullmatch(rf"done        3 points run \(6 tasks\), 0 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
                         lines[4])
     assert lines[5] == "plots       " + ", ".join(str(out / f"{n}.png") for n in sweep.observables)
     assert lines[6] == (f"liu         largest deviation of Z from Liu's: {100 * worst[3]:+.2f}% ({worst[4]:+.1f} "
@@ -931,7 +935,7 @@ def test_the_command_says_what_it_ran_line_by_line(serial, tmp_path, capsys):
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
     again = capsys.readouterr().out.splitlines()
     assert again[0] == lines[0] and again[2:] == lines[5:]
-    assert re.fullmatch(rf"done        0 points run, 3 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
+    assert re.fullmatch(rf"done        0 points run \(0 tasks\), 3 already in {re.escape(str(out / 'results.csv'))}, \d+\.\d s",
                         again[1])
 
 
@@ -1090,7 +1094,7 @@ def test_the_command_says_how_many_tasks_went_on_from_a_checkpoint(circles_cpu, 
     capsys.readouterr()
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
     done = [line for line in capsys.readouterr().out.splitlines() if line.startswith("done")]
-    assert re.fullmatch(r"done        1 points run, 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
+    assert re.fullmatch(r"done        1 points run \(1 tasks\), 0 already in .*results.csv, \d+\.\d s; tasks that went on from a "
                         r"checkpoint: 1", done[0])
     assert not (out / sweeps.CHECKPOINTS).exists()
 
@@ -1115,7 +1119,7 @@ def test_the_command_says_how_many_tasks_an_earlier_run_did(serial, tmp_path, ca
     capsys.readouterr()
     assert sweeps.main(["sweep", str(path), "--workers", "0", "--out", str(out)]) == 0
     done = [line for line in capsys.readouterr().out.splitlines() if line.startswith("done")]
-    assert re.fullmatch(r"done        2 points run, 1 already in .*results.csv, \d+\.\d s; tasks done by an earlier "
+    assert re.fullmatch(r"done        2 points run \(3 tasks\), 1 already in .*results.csv, \d+\.\d s; tasks done by an earlier "
                         r"run: 1", done[0])
     assert len(calls) == 4 + 3 and table(out) == table(serial[1])
 
