@@ -588,7 +588,7 @@ class _CsvFile:
 
     def write(self, row, replaces=None):
         """Append `row`; with `replaces` (the row it takes the place of), write the file anew
-        without that one, whole (renamed into place once on disk)."""
+        with `row` in that one's place, whole (renamed into place once on disk)."""
         if replaces is None:
             self.writer.writerow(row)
             self._sync()
@@ -597,12 +597,14 @@ class _CsvFile:
 
         self.file.close()
         with open(self.path, newline="") as file:
-            rows = [r for r in csv.DictReader(file) if r != replaces]
+            rows = [row if r == replaces else r for r in csv.DictReader(file)]
+        if row not in rows:  # the row it replaces is not there: the new one comes last
+            rows.append(row)
         with replaced_whole(self.path) as part:
             with open(part, "w", newline="") as file:
                 writer = csv.DictWriter(file, self.columns, lineterminator="\n")
                 writer.writeheader()
-                writer.writerows([*rows, row])
+                writer.writerows(rows)
                 file.flush()
                 os.fsync(file.fileno())
         self._open()

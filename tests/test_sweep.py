@@ -1303,6 +1303,21 @@ def test_results_csv_cut_short_by_a_stop_loses_only_its_last_line(serial, tmp_pa
         sweeps.read_results(copy, unnamed)
 
 
+def test_a_rewritten_row_keeps_its_place_in_the_file(tmp_path):
+    """A point grown with more repeats finishes in any order: its new row takes its old row's
+    place, so results.csv keeps the order its points were first written in. A row whose old
+    one is not in the file (changed under the run) is appended, not lost."""
+    path = tmp_path / "results.csv"
+    file = sweeps._CsvFile(str(path), ["x", "y"])
+    for x in ("1", "2", "3"):
+        file.write({"x": x, "y": "a"})
+    file.write({"x": "1", "y": "b"}, replaces={"x": "1", "y": "a"})
+    file.write({"x": "4", "y": "c"}, replaces={"x": "4", "y": "gone"})
+    file.write({"x": "5", "y": "d"})
+    file.close()
+    assert path.read_text() == "x,y\n1,b\n2,a\n3,a\n4,c\n5,d\n"
+
+
 def test_a_sweep_file_takes_species_in_its_scene_and_varies_them(circles_cpu, tmp_path):
     """[scene] species, and species in [vary]: each point's scene holds its mixture, and a task
     runs it (its rows keep the temperature, which every point measures)."""
