@@ -597,8 +597,10 @@ class _CsvFile:
 
         self.file.close()
         with open(self.path, newline="") as file:
-            rows = [row if r == replaces else r for r in csv.DictReader(file)]
-        if row not in rows:  # the row it replaces is not there: the new one comes last
+            rows = list(csv.DictReader(file))
+        if replaces in rows:
+            rows[rows.index(replaces)] = row
+        else:  # the row it replaces is not there: the new one comes last
             rows.append(row)
         with replaced_whole(self.path) as part:
             with open(part, "w", newline="") as file:
