@@ -1022,7 +1022,9 @@ def main(argv):
 
         run = run_sweep(sweep, out, client=client, threads=threads, on_row=on_row)
         resumed = sum(1 for result in run.results.values() if result.get("resumed_at", 0.0) > 0)
-        print(f"done        {len(run.ran)} points run ({len(run.results) - len(run.kept)} tasks), {len(run.skipped)} already in {os.path.join(out, RESULTS)}, "
+        tasks = len(run.results) - len(run.kept)  # run now, not taken from DIR/tasks/
+        print(f"done        {len(run.ran)} points run ({tasks} tasks), {len(run.skipped)} already in "
+              f"{os.path.join(out, RESULTS)}, "
               f"{run.wall_s:.1f} s" + (f"; tasks that went on from a checkpoint: {resumed}" if resumed else "")
               + (f"; tasks done by an earlier run: {len(run.kept)}" if run.kept else ""), flush=True)
         try:
