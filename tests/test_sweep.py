@@ -749,6 +749,39 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
     assert f"done        4 points run (8 tasks), 0 already in {out / 'results.csv'}, " in capsys.readouterr().out
 
 
+def test_one_point_grows_alone_from_a_file_that_lists_only_its_values(serial, tmp_path):
+    """A copy of the tiny sweep whose [vary] lists only 0.3, with four repeats, run into the
+    folder of the three points: only 0.3's repeats 2 and 3 run, its row is written anew in its
+    place (as four repeats in one go give it) and the other rows stay as they were, byte for
+    byte. The whole file with four repeats then runs only the other points' new repeats."""
+    import shutil
+
+    sweep, serial_out = serial
+    out = tmp_path / "out"
+    shutil.copytree(serial_out, out)
+    before = (out / "results.csv").read_text().splitlines()
+    alone = TINY.replace("repeats = 2", "repeats = 4").replace("[0.1, 0.3, 0.5]", "[0.3]")
+    ran = []
+    run = sweeps.run_sweep(sweeps.read_sweep(write(tmp_path, alone, "alone.toml")), out,
+                           on_result=lambda task, result: ran.append(task))
+    assert run.ran == [0] and ran == [(0, 2), (0, 3)]
+    after = (out / "results.csv").read_text().splitlines()
+    assert len(after) == 4 and after[0] == before[0] and after[1] == before[1] and after[3] == before[3]
+    assert after[2] != before[2] and after[2].startswith("0.3,4,")
+    whole = tmp_path / "whole"
+    sweeps.run_sweep(sweeps.read_sweep(write(tmp_path, alone, "whole.toml")), whole)
+    for column, got, want in zip(NUMBERS, table(out)["0.3"], table(whole)["0.3"]):
+        if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
+            assert got == want, column
+        else:
+            assert math.isclose(float(got), float(want), rel_tol=1e-9, abs_tol=1e-24), (column, got, want)
+    ran.clear()
+    four = sweeps.read_sweep(write(tmp_path, TINY.replace("repeats = 2", "repeats = 4"), "four.toml"))
+    assert sweeps.run_sweep(four, out, on_result=lambda task, result: ran.append(task)).ran == [0, 2]
+    assert ran == [(0, 2), (0, 3), (2, 2), (2, 3)]
+    assert list(table(out)) == ["0.1", "0.3", "0.5"] and {row[1] for row in table(out).values()} == {"4"}
+
+
 def test_pooled_parts_have_the_mean_and_standard_error_of_all_their_samples():
     rng = np.random.default_rng(5)
     for sizes in ((1, 4), (7, 3), (40, 1), (12, 12), (3, 5, 1, 9), (2, 3), (1, 1)):
