@@ -1761,6 +1761,15 @@ def test_the_coexistence_sweep_runs_points_of_the_melting_sweep_five_times_longe
                                          melting.scene["seed"])
     assert at_0718.points == [p for p in melting.points if p["area_fraction"] == 0.718] and len(at_0718.points) == 2
     assert at_0718.identity() == {**at_0714.identity(), "scene": at_0718.scene} and at_0718.repeats == 8
+    long = sweeps.read_sweep("scenes/melting_0718_long.toml")  # 0.718 for a cluster: runs of many switches
+    seeds = (at_0718.scene["seed"], at_0714.scene["seed"], more.scene["seed"], longer.scene["seed"],
+             melting.scene["seed"])
+    assert {k: v for k, v in long.scene.items() if k != "seed"} == {k: v for k, v in at_0718.scene.items()
+                                                                     if k != "seed"} and long.scene["seed"] not in seeds
+    assert long.points == at_0718.points and (long.blocks, long.observables) == (1, at_0718.observables)
+    lifetime = 400000 / 6  # of a state at 0.718: six switches in the long run of the Validation page
+    assert long.equilibrate >= 3 * lifetime and long.measure >= 6 * lifetime and long.repeats * long.measure >= 12.8e6
+    assert 0 < long.checkpoint_every < long.equilibrate
 
 
 def test_the_large_melting_sweep_is_engel_s_square_box_compared_with_engel_s_molecular_dynamics():
