@@ -32,10 +32,12 @@ from circles import sweep as sweeps  # noqa: E402
 #: The committed sweeps: file, results folder, and the machine and date its results were measured on.
 FAST = "AMD EPYC (family 26, model 2, L2 1024K, L3 32768K), 2 CPUs"
 SLOW = "AMD EPYC (family 25, model 1, L2 512K, L3 32768K), 2 CPUs"
+XEON = "Intel Xeon (family 6, model 167, L2 2048K, L3 491520K), 2 CPUs"
 DEFAULT = [("scenes/melting_sweep.toml", "outputs/melting_sweep", f"{FAST}, 2026-12-06"),
            ("scenes/melting_coexistence.toml", "outputs/melting_coexistence", f"{FAST}, 2026-12-07"),
            ("scenes/melting_coexistence_more.toml", "outputs/melting_coexistence_more", f"{FAST}, 2026-12-07"),
-           ("scenes/melting_0714.toml", "outputs/melting_0714", f"{SLOW}, 2026-12-07"),
+           ("scenes/melting_0714.toml", "outputs/melting_0714",
+            f"{SLOW}, 2026-12-07; the compressed start's repeats 26 to 43 on an {XEON}, 2026-12-08"),
            ("scenes/melting_0718.toml", "outputs/melting_0718", f"{SLOW}, 2026-12-07")]
 
 
@@ -56,10 +58,12 @@ def main():
     for path, results, where in pairs:
         sweep = sweeps.read_sweep(path)
         name = os.path.relpath(path, ROOT)
-        runs.append((name, f"`{name}` ({where}): {sweep.repeats} repeats of {sweep.equilibrate:g} time units of "
+        rows = list(sweeps.load_rows(results, sweep))
+        repeats = " or ".join(str(r) for r in sorted({int(row["repeats"]) for _, row in rows}))  # a point grown alone
+        runs.append((name, f"`{name}` ({where}): {repeats} repeats of {sweep.equilibrate:g} time units of "
                            f"equilibration and {sweep.measure:g} of measurement in {sweep.blocks} "
                            f"block{'s' if sweep.blocks > 1 else ''} per point"))
-        for values, row in sweeps.load_rows(results, sweep):
+        for values, row in rows:
             points.append((float(values["area_fraction"]), values.get("start", ""), int(row["repeats"]) * sweep.measure,
                            sweep, values, row))
     points = join(points)
