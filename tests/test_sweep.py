@@ -64,6 +64,16 @@ def table(out):
         return {row["area_fraction"]: [row[c] for c in NUMBERS] for row in csv.DictReader(file)}
 
 
+def assert_grown_row(phi, got, want):
+    """A grown row's numbers (`table`) against a row of all its repeats in one go: the counts
+    exactly, the means and standard errors to the round-off of their pairwise update."""
+    for column, g, w in zip(NUMBERS, got, want):
+        if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
+            assert g == w, (phi, column)
+        else:
+            assert math.isclose(float(g), float(w), rel_tol=1e-9, abs_tol=1e-24), (phi, column, g, w)
+
+
 def runs(out):
     """{(area_fraction, repeat): the task's row of out/runs.csv but its seconds}, and the count
     of its rows."""
@@ -731,11 +741,7 @@ def test_more_repeats_run_only_the_new_ones_and_rewrite_each_row(serial, tmp_pat
     assert sorted(grown) == sorted(expect) and list(grown)[-1] == "0.4"
     assert (out / "results.csv").read_bytes().count(b"\n") == 5 and b"\r" not in (out / "results.csv").read_bytes()
     for phi, numbers in expect.items():
-        for column, got, want in zip(NUMBERS, grown[phi], numbers):
-            if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
-                assert got == want, (phi, column)
-            else:
-                assert math.isclose(float(got), float(want), rel_tol=1e-9, abs_tol=1e-24), (phi, column, got, want)
+        assert_grown_row(phi, grown[phi], numbers)
     assert sweeps.run_sweep(four, out).ran == [] and not (out / sweeps.TASKS).exists()
     assert runs(out) == runs(whole)
     before = (out / "results.csv").read_bytes()
@@ -770,11 +776,7 @@ def test_one_point_grows_alone_from_a_file_that_lists_only_its_values(serial, tm
     assert after[2] != before[2] and after[2].startswith("0.3,4,")
     whole = tmp_path / "whole"
     sweeps.run_sweep(sweeps.read_sweep(write(tmp_path, alone, "whole.toml")), whole)
-    for column, got, want in zip(NUMBERS, table(out)["0.3"], table(whole)["0.3"]):
-        if column in ("area_fraction", "repeats", "blocks", "pair_collisions"):
-            assert got == want, column
-        else:
-            assert math.isclose(float(got), float(want), rel_tol=1e-9, abs_tol=1e-24), (column, got, want)
+    assert_grown_row("0.3", table(out)["0.3"], table(whole)["0.3"])
     ran.clear()
     four = sweeps.read_sweep(write(tmp_path, TINY.replace("repeats = 2", "repeats = 4"), "four.toml"))
     assert sweeps.run_sweep(four, out, on_result=lambda task, result: ran.append(task)).ran == [0, 2]
